@@ -1,0 +1,4 @@
+from mocap.cli import main
+import sys
+
+sys.exit(main())

@@ -1,0 +1,89 @@
+"""Checkpoint files: written atomically, carrying the spec and the package versions that made them."""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import tempfile
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import torch
+
+
+def package_versions() -> dict[str, str]:
+    """Versions of Python and of the packages that decide a result."""
+    out = {"python": platform.python_version(), "platform": platform.platform()}
+    for name in ("mocap", "torch", "mujoco", "numpy", "pydantic", "pluggy"):
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = "not installed"
+    return out
+
+
+def hardware() -> dict[str, Any]:
+    info: dict[str, Any] = {"cpu_count": os.cpu_count(), "machine": platform.machine()}
+    if torch.cuda.is_available():  # pragma: no cover - no GPU in CI
+        info["cuda"] = torch.cuda.get_device_name(0)
+    return info
+
+
+def atomic_write_bytes(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` so that readers see the old file or the whole new one, never a part."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def atomic_write_json(path: Path, data: Any) -> None:
+    atomic_write_text(path, json.dumps(data, indent=2, sort_keys=True) + "\n")
+
+
+def save_checkpoint(path: Path, payload: dict[str, Any], *, spec_yaml: str | None = None) -> None:
+    """``torch.save`` ``payload`` plus ``versions`` (and the resolved ``spec`` when given), atomically."""
+    import io
+
+    payload = dict(payload)
+    payload.setdefault("versions", package_versions())
+    if spec_yaml is not None:
+        payload["spec"] = spec_yaml
+    buffer = io.BytesIO()
+    torch.save(payload, buffer)
+    atomic_write_bytes(Path(path), buffer.getvalue())
+
+
+def load_checkpoint(path: Path, map_location: str | torch.device = "cpu") -> dict[str, Any]:
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such checkpoint")
+    try:
+        return torch.load(path, map_location=map_location, weights_only=False)
+    except Exception as exc:  # noqa: BLE001
+        raise ValueError(f"{path}: unreadable checkpoint ({type(exc).__name__}: {exc})") from None
+
+
+__all__ = [
+    "atomic_write_bytes",
+    "atomic_write_json",
+    "atomic_write_text",
+    "hardware",
+    "load_checkpoint",
+    "package_versions",
+    "save_checkpoint",
+]

@@ -1,0 +1,210 @@
+"""The ``mocap`` command line (typer). Plugins add commands through ``register_commands(app)``.
+
+Exit codes: 0 success, 1 a run failed, 2 bad user input (spec, plugin names, data files),
+130 interrupted (the run saved a checkpoint; the same command resumes it).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from mocap import __version__
+from mocap.plugins import PluginError, PluginSet, get_plugins
+
+console = Console(soft_wrap=True)
+err_console = Console(stderr=True, soft_wrap=True)
+
+EXIT_USER_ERROR = 2
+EXIT_INTERRUPTED = 130
+
+
+class UserError(Exception):
+    """An error in what the user gave us: printed as one clear message, exit code 2, no traceback."""
+
+
+def user_errors() -> tuple[type[BaseException], ...]:
+    """Exception types that are the user's input, not a bug (printed without a traceback)."""
+    from mocap.motion.clip import MotionDataError
+    from mocap.spec import SpecError
+
+    return (UserError, SpecError, PluginError, MotionDataError)
+
+
+def fail(message: str, code: int = EXIT_USER_ERROR) -> "typer.Exit":
+    err_console.print(f"[red]error:[/] {message}", highlight=False)
+    return typer.Exit(code)
+
+
+def report_plugin_failures(pset: PluginSet) -> None:
+    for failure in pset.failures:
+        err_console.print(f"[yellow]warning:[/] {failure.line()}", highlight=False)
+
+
+def _plugins() -> PluginSet:
+    return get_plugins()
+
+
+SetOption = Annotated[
+    Optional[list[str]],
+    typer.Option("--set", "-s", help="override a spec field: a.b.c=value (repeatable)", show_default=False),
+]
+
+
+def _load(spec_path: Path, overrides: list[str] | None):  # -> ResolvedSpec
+    from mocap.spec import load_spec
+
+    pset = _plugins()
+    return load_spec(spec_path, pset, overrides or [])
+
+
+def cmd_validate(spec: Annotated[Path, typer.Argument(help="spec YAML file")], set_: SetOption = None) -> None:
+    """Check a spec (structure, plugin names, every component's params) without running it."""
+    from mocap.pipeline import stage_keys
+
+    resolved = _load(spec, set_)
+    keys = stage_keys(resolved.spec)
+    stages = ", ".join(f"{s} ({k})" for s, k in keys.items()) or "none"
+    console.print(f"[green]ok[/]: {spec} is a valid spec {resolved.spec.name!r}; stages: {stages}", highlight=False)
+
+
+def cmd_run(
+    spec: Annotated[Path, typer.Argument(help="spec YAML file")],
+    set_: SetOption = None,
+    out: Annotated[Optional[Path], typer.Option("--out", "-o", help="run directory (default: runs/<spec name>)")] = None,
+    store: Annotated[
+        Optional[Path], typer.Option("--store", help="artifact store shared between runs (default: <run dir>/../artifacts)")
+    ] = None,
+) -> None:
+    """Run a spec: imitator -> latent -> task -> eval, reusing artifacts of identical stages."""
+    from mocap.pipeline import PipelineInterrupted, run_pipeline
+
+    resolved = _load(spec, set_)
+    out_dir = out or Path("runs") / resolved.spec.name
+    try:
+        records = run_pipeline(resolved, _plugins(), out_dir, store=store, console=console)
+    except PipelineInterrupted as exc:
+        err_console.print(
+            f"[yellow]interrupted[/] during stage {exc.args[0]!r}; its checkpoint is saved. "
+            f"Run the same command again to resume."
+        )
+        raise typer.Exit(EXIT_INTERRUPTED) from None
+    console.print(f"[bold green]done[/]: {len(records)} stage(s); report: {out_dir / 'report.md'}", highlight=False)
+
+
+def cmd_schema(
+    out: Annotated[Optional[Path], typer.Option("--out", "-o", help="write to this file instead of stdout")] = None,
+) -> None:
+    """Print the JSON Schema of specs (component params typed by the installed plugins)."""
+    from mocap.spec import json_schema
+
+    text = json.dumps(json_schema(_plugins()), indent=2)
+    if out is None:
+        sys.stdout.write(text + "\n")
+    else:
+        out.write_text(text + "\n", encoding="utf-8")
+        console.print(f"wrote {out}")
+
+
+def cmd_plugins(as_json: Annotated[bool, typer.Option("--json", help="machine-readable output")] = False) -> None:
+    """List installed plugins: name, package, version, hooks, and what they register."""
+    pset = _plugins()
+    registered: dict[str, list[str]] = {}
+    for kind, comps in pset.components.items():
+        for name, comp in sorted(comps.items()):
+            registered.setdefault(comp.plugin, []).append(f"{kind}:{name}")
+    duplicates = [
+        {"kind": k, "name": n, "plugins": owners} for (k, n), owners in sorted(pset.duplicates.items())
+    ]
+    if as_json:
+        data = {
+            "plugins": [
+                {
+                    "name": p.name,
+                    "package": p.package,
+                    "version": p.version,
+                    "module": p.module,
+                    "hooks": list(p.hooks),
+                    "registers": registered.get(p.name, []),
+                }
+                for p in pset.plugins
+            ],
+            "failures": [{"name": f.name, "package": f.package, "error": f.error} for f in pset.failures],
+            "duplicates": duplicates,
+        }
+        sys.stdout.write(json.dumps(data, indent=2) + "\n")
+    else:
+        table = Table(title=f"mocap {__version__} plugins")
+        for col in ("name", "package", "version", "hooks", "registers"):
+            table.add_column(col)
+        for p in pset.plugins:
+            table.add_row(p.name, p.package, p.version, "\n".join(p.hooks), "\n".join(registered.get(p.name, [])))
+        console.print(table)
+    for dup in duplicates:
+        err_console.print(
+            f"[red]error:[/] {dup['kind']} {dup['name']!r} is registered by more than one plugin: "
+            f"{' and '.join(repr(o) for o in dup['plugins'])}",
+            highlight=False,
+        )
+    if duplicates:
+        raise typer.Exit(EXIT_USER_ERROR)
+
+
+def build_app(pset: PluginSet | None = None) -> typer.Typer:
+    """The root app with the core commands and every plugin's commands."""
+    app = typer.Typer(
+        name="mocap",
+        help="Physics-based humanoid motion representations: run, validate and inspect specs.",
+        no_args_is_help=True,
+        pretty_exceptions_show_locals=False,
+        add_completion=False,
+    )
+    app.command("run")(cmd_run)
+    app.command("validate")(cmd_validate)
+    app.command("schema")(cmd_schema)
+    app.command("plugins")(cmd_plugins)
+
+    @app.callback(invoke_without_command=True)
+    def _root(
+        version: Annotated[bool, typer.Option("--version", help="print the version and exit")] = False,
+    ) -> None:
+        if version:
+            console.print(f"mocap {__version__}")
+            raise typer.Exit(0)
+
+    (pset or _plugins()).commands(app)
+    return app
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Console-script entry point: user errors are one clear message and exit code 2."""
+    pset = _plugins()
+    app = build_app(pset)
+    report_plugin_failures(pset)
+    try:
+        rc = app(args=argv, standalone_mode=False, prog_name="mocap")
+        return rc if isinstance(rc, int) else 0
+    except typer.Exit as exc:
+        return int(exc.exit_code or 0)
+    except user_errors() as exc:
+        message = exc.format() if hasattr(exc, "format") and callable(exc.format) else str(exc)
+        err_console.print(f"[red]error:[/] {message}", highlight=False)
+        return EXIT_USER_ERROR
+    except KeyboardInterrupt:
+        err_console.print("[yellow]interrupted[/]")
+        return EXIT_INTERRUPTED
+    except Exception as exc:  # usage errors of typer's (vendored) click arrive here in non-standalone mode
+        if callable(getattr(exc, "show", None)) and isinstance(getattr(exc, "exit_code", None), int):
+            exc.show()
+            return exc.exit_code
+        if type(exc).__name__ == "Abort":
+            err_console.print("[yellow]aborted[/]")
+            return EXIT_INTERRUPTED
+        raise
+    return 0

@@ -1,0 +1,329 @@
+"""The pipeline runner: ``imitator -> latent -> task -> eval``, with artifacts reused across specs.
+
+Each stage's artifact lives in ``<store>/<stage>-<key>/`` where ``key`` hashes the stage's
+resolved section, the sections it depends on (humanoid, motions, simulator, seed) and the keys of
+the stages upstream of it. A second spec with the same imitator section therefore finds the
+trained imitator and reuses it; changing anything the imitator depends on gives a new key.
+
+A stage is complete when its ``DONE.json`` exists (written atomically last). An incomplete
+artifact directory holds the trainer's last checkpoint, so running the same command again
+resumes it. A stage may instead name an existing ``checkpoint:`` (keyed by the file's content),
+or name neither trainer nor checkpoint (an untrained component, e.g. a baseline).
+
+Run directory (``runs/<spec name>`` unless ``--out``): ``spec.yaml`` (resolved), ``metrics.jsonl``,
+``tb/`` (TensorBoard), ``stages.json`` (artifact dir and result of every stage), ``report.md``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import signal
+import time
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import Any, Callable
+
+import torch
+from pydantic import BaseModel
+from rich.console import Console
+
+from mocap.checkpoint import atomic_write_json, atomic_write_text, hardware, package_versions
+from mocap.interfaces import StageResult
+from mocap.plugins import PluginSet
+from mocap.runlog import MetricsLogger
+from mocap.skeleton import Skeleton
+from mocap.spec import STAGES, ResolvedSpec, Spec
+
+ARTIFACT_FORMAT = 1
+DONE_FILE = "DONE.json"
+
+#: sections every stage depends on, besides its own and its upstream stages
+_CONTEXT_SECTIONS = ("humanoid", "motions", "simulator", "seed")
+
+
+class PipelineInterrupted(Exception):
+    """The user pressed Ctrl-C; the running stage saved a checkpoint and the run can be resumed."""
+
+
+class StageFailed(Exception):
+    """A stage could not run (bad checkpoint path, trainer error that is the user's to fix)."""
+
+
+def _canonical(data: Any) -> str:
+    return json.dumps(data, sort_keys=True, separators=(",", ":"), default=str)
+
+
+def _file_digest(path: Path) -> str:
+    h = hashlib.sha256()
+    with path.open("rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def stage_keys(spec: Spec) -> dict[str, str]:
+    """Artifact key of every stage the spec names (same spec -> same keys)."""
+    dumped = spec.model_dump(mode="json")
+    context = {name: dumped[name] for name in _CONTEXT_SECTIONS}
+    keys: dict[str, str] = {}
+    upstream: list[str] = []
+    for stage in STAGES:
+        section = dumped.get(stage)
+        if section is None:
+            continue
+        ckpt = section.get("checkpoint") if isinstance(section, dict) else None
+        if ckpt:
+            path = Path(ckpt)
+            content = _file_digest(path) if path.is_file() else f"missing:{path}"
+            material = {"format": ARTIFACT_FORMAT, "stage": stage, "name": section["name"], "checkpoint": content}
+        else:
+            material = {"format": ARTIFACT_FORMAT, "stage": stage, "section": section, "context": context, "upstream": upstream}
+        key = hashlib.sha256(_canonical(material).encode()).hexdigest()[:16]
+        keys[stage] = key
+        upstream = [*upstream, key]
+    return keys
+
+
+def derive_seed(seed: int, stage: str) -> int:
+    """A per-stage seed, stable across runs and independent between stages."""
+    return int.from_bytes(hashlib.sha256(f"{seed}:{stage}".encode()).digest()[:4], "little")
+
+
+def resolve_device(name: str) -> torch.device:
+    if name == "cuda" or (name == "auto" and torch.cuda.is_available()):
+        if not torch.cuda.is_available():
+            raise StageFailed("spec asks for device 'cuda' but torch sees no CUDA device")
+        return torch.device("cuda")
+    return torch.device("cpu")
+
+
+@dataclass
+class StageContext:
+    """What a trainer gets to run one stage.
+
+    Attributes:
+        stage: ``imitator``, ``latent``, ``task`` or ``eval``.
+        resolved: the validated spec (``resolved.spec``) and the params instances.
+        plugins: the registry, to build components.
+        workdir: this stage's artifact directory (checkpoints go here; resume from here).
+        run_dir: the run directory (reports, videos).
+        upstream: results of the stages before this one.
+        log: metrics logger for this stage (``metrics.jsonl`` + TensorBoard in the run dir).
+        seed: this stage's seed.
+        device: torch device for networks.
+        console: where to print progress.
+    """
+
+    stage: str
+    resolved: ResolvedSpec
+    plugins: PluginSet
+    workdir: Path
+    run_dir: Path
+    upstream: dict[str, StageResult]
+    log: MetricsLogger
+    seed: int
+    device: torch.device
+    console: Console
+    _stop: Callable[[], bool] = field(default=lambda: False, repr=False)
+
+    @property
+    def spec(self) -> Spec:
+        return self.resolved.spec
+
+    def should_stop(self) -> bool:
+        """True once the user asked to stop (Ctrl-C): save a checkpoint and return."""
+        return self._stop()
+
+    def params(self, path: str) -> BaseModel | None:
+        return self.resolved.params.get(path)
+
+    def build(self, path: str, **kwargs: Any) -> Any:
+        """Build the component at dotted spec ``path`` (``simulator``, ``latent``, ``task.trainer``...)."""
+        from mocap.spec import iter_components
+
+        for p, kind, ref in iter_components(self.spec):
+            if p == path:
+                return self.plugins.get(kind, ref.name).build(self.resolved.params.get(p), **kwargs)
+        raise KeyError(f"the spec has no component at {path!r}")
+
+    @cached_property
+    def skeleton(self) -> Skeleton:
+        return self.build("humanoid")
+
+    def spec_yaml(self) -> str:
+        return self.resolved.to_yaml()
+
+
+@dataclass
+class StageRecord:
+    stage: str
+    key: str
+    workdir: Path
+    result: StageResult
+    reused: bool
+    seconds: float
+
+
+class _StopFlag:
+    """First Ctrl-C asks the running stage to stop cleanly; a second one interrupts at once."""
+
+    def __init__(self, console: Console):
+        self.console = console
+        self.requested = False
+        self._previous: Any = None
+
+    def __enter__(self) -> "_StopFlag":
+        try:
+            self._previous = signal.signal(signal.SIGINT, self._handle)
+        except ValueError:  # not in the main thread (e.g. some test runners): no handler
+            self._previous = None
+        return self
+
+    def _handle(self, signum: int, frame: Any) -> None:
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+        self.console.print("[yellow]stopping after the current iteration (checkpoint will be saved); Ctrl-C again to abort[/]")
+
+    def __exit__(self, *exc: Any) -> None:
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+
+
+def artifact_store(out_dir: Path) -> Path:
+    """Artifacts are shared by every run under the same parent directory (``runs/artifacts``)."""
+    return out_dir.parent / "artifacts"
+
+
+def run_pipeline(
+    resolved: ResolvedSpec,
+    plugins: PluginSet,
+    out_dir: Path,
+    *,
+    store: Path | None = None,
+    console: Console | None = None,
+) -> list[StageRecord]:
+    """Run every stage the spec names, reusing finished artifacts; return what each stage did."""
+    console = console or Console()
+    spec = resolved.spec
+    out_dir = Path(out_dir)
+    store = Path(store) if store is not None else artifact_store(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out_dir / "spec.yaml", resolved.to_yaml())
+    if spec.torch_threads is not None:
+        torch.set_num_threads(spec.torch_threads)
+    device = resolve_device(spec.device)
+    keys = stage_keys(spec)
+    records: list[StageRecord] = []
+    upstream: dict[str, StageResult] = {}
+    started = time.time()
+    with _StopFlag(console) as stop:
+        for stage in STAGES:
+            if stage not in keys:
+                continue
+            record = _run_stage(stage, keys[stage], resolved, plugins, out_dir, store, upstream, device, console, stop)
+            records.append(record)
+            upstream[stage] = record.result
+            _write_stages(out_dir, records)
+            if stop.requested:
+                raise PipelineInterrupted(stage)
+    from mocap.report import write_report
+
+    write_report(out_dir, resolved, records, wall_seconds=time.time() - started)
+    return records
+
+
+def _run_stage(
+    stage: str,
+    key: str,
+    resolved: ResolvedSpec,
+    plugins: PluginSet,
+    out_dir: Path,
+    store: Path,
+    upstream: dict[str, StageResult],
+    device: torch.device,
+    console: Console,
+    stop: _StopFlag,
+) -> StageRecord:
+    spec = resolved.spec
+    section = getattr(spec, stage)
+    workdir = store / f"{stage}-{key}"
+    done = workdir / DONE_FILE
+    t0 = time.time()
+    if done.is_file():
+        result = _read_result(done)
+        console.print(f"[green]{stage}[/]: reusing the trained artifact {workdir} (same {stage} section and upstream as an earlier run)")
+        return StageRecord(stage, key, workdir, result, True, 0.0)
+    checkpoint = getattr(section, "checkpoint", None)
+    if checkpoint is not None:
+        if not Path(checkpoint).is_file():
+            raise StageFailed(f"{stage}.checkpoint: {checkpoint}: no such file")
+        console.print(f"[green]{stage}[/]: using checkpoint {checkpoint}")
+        return StageRecord(stage, key, workdir, StageResult(checkpoint=Path(checkpoint)), True, 0.0)
+    trainer_ref = section.trainer
+    if trainer_ref is None:
+        console.print(f"[green]{stage}[/]: {section.name} needs no training")
+        return StageRecord(stage, key, workdir, StageResult(checkpoint=None), False, 0.0)
+    workdir.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(workdir / "spec.yaml", resolved.to_yaml())
+    log = MetricsLogger(out_dir / "metrics.jsonl", stage, tensorboard_dir=out_dir / "tb")
+    ctx = StageContext(
+        stage=stage,
+        resolved=resolved,
+        plugins=plugins,
+        workdir=workdir,
+        run_dir=out_dir,
+        upstream=dict(upstream),
+        log=log,
+        seed=derive_seed(spec.seed, stage),
+        device=device,
+        console=console,
+        _stop=lambda: stop.requested,
+    )
+    trainer = ctx.build(f"{stage}.trainer")
+    verb = "resuming" if any(workdir.glob("*.pt")) else "running"
+    console.print(f"[bold]{stage}[/]: {verb} trainer {trainer_ref.name!r} in {workdir}")
+    try:
+        result = trainer.run(ctx)
+    finally:
+        log.close()
+    if not stop.requested:
+        atomic_write_json(
+            done,
+            {
+                "stage": stage,
+                "key": key,
+                "checkpoint": str(result.checkpoint) if result.checkpoint else None,
+                "metrics": result.metrics,
+                "versions": package_versions(),
+                "hardware": hardware(),
+                "seconds": round(time.time() - t0, 2),
+            },
+        )
+    return StageRecord(stage, key, workdir, result, False, time.time() - t0)
+
+
+def _read_result(done: Path) -> StageResult:
+    data = json.loads(done.read_text(encoding="utf-8"))
+    ckpt = data.get("checkpoint")
+    return StageResult(checkpoint=Path(ckpt) if ckpt else None, metrics=data.get("metrics", {}))
+
+
+def _write_stages(out_dir: Path, records: list[StageRecord]) -> None:
+    atomic_write_json(
+        out_dir / "stages.json",
+        [
+            {
+                "stage": r.stage,
+                "key": r.key,
+                "artifact_dir": str(r.workdir),
+                "checkpoint": str(r.result.checkpoint) if r.result.checkpoint else None,
+                "metrics": r.result.metrics,
+                "reused": r.reused,
+                "seconds": round(r.seconds, 2),
+            }
+            for r in records
+        ],
+    )

@@ -1,0 +1,1 @@
+"""mocap_sim_mujoco: the MuJoCo simulator plugin (batched envs, MJCF generated from skeletons, rendering)."""

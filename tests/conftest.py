@@ -1,0 +1,22 @@
+import os
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+
+sys.path.insert(0, str(Path(__file__).parent))
+os.environ.setdefault("MUJOCO_GL", "egl")
+torch.set_num_threads(1)
+
+
+@pytest.fixture
+def toy_plugins():
+    """The installed plugins plus the throw-away ``toy`` plugin, as the process-wide set."""
+    from toy_plugins import CountTrainer, toy
+
+    from mocap.testing import use_plugins
+
+    CountTrainer.calls.clear()
+    with use_plugins(("toy", toy)) as pset:
+        yield pset

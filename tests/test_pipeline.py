@@ -1,0 +1,96 @@
+"""Pipeline: stage order, artifact keys (stable, sensitive), reuse across specs, resume after Ctrl-C."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from rich.console import Console
+from toy_plugins import TOY_SPEC, CountTrainer, toy
+
+from mocap.checkpoint import save_checkpoint
+from mocap.pipeline import PipelineInterrupted, run_pipeline, stage_keys
+from mocap.plugins import load_plugins
+from mocap.spec import load_spec_text
+
+PSET = load_plugins([("toy", toy)], entry_points=False)
+
+
+def resolve(overrides=None, text=TOY_SPEC):
+    return load_spec_text(text, PSET, overrides=overrides)
+
+
+def quiet() -> Console:
+    return Console(file=open("/dev/null", "w"))
+
+
+def test_same_spec_same_keys_and_any_relevant_change_new_keys():
+    base = stage_keys(resolve().spec)
+    assert set(base) == {"imitator", "latent"}
+    assert stage_keys(resolve().spec) == base
+    # a change in the latent section changes only the latent key
+    k = stage_keys(resolve(["latent.params.hidden=9"]).spec)
+    assert k["imitator"] == base["imitator"] and k["latent"] != base["latent"]
+    # a change upstream (imitator) or in the shared context changes both
+    for change in (["imitator.params.optim.lr=0.5"], ["imitator.trainer.params.iterations=4"], ["seed=1"], ["simulator.params.hidden=5"]):
+        k = stage_keys(resolve(change).spec)
+        assert k["imitator"] != base["imitator"] and k["latent"] != base["latent"], change
+    # names and descriptions are not part of any stage
+    assert stage_keys(resolve(["name=other", "description=x"]).spec) == base
+    # writing a default explicitly is the same spec
+    assert stage_keys(resolve(["latent.params.hidden=8"]).spec) == base
+
+
+def test_run_writes_run_dir_and_second_spec_reuses_shared_imitator(tmp_path: Path):
+    CountTrainer.calls.clear()
+    out = tmp_path / "runs" / "a"
+    records = run_pipeline(resolve(), PSET, out, console=quiet())
+    assert [r.stage for r in records] == ["imitator", "latent"] and not any(r.reused for r in records)
+    assert CountTrainer.calls == ["imitator", "latent"]
+    for name in ("spec.yaml", "metrics.jsonl", "report.md", "stages.json"):
+        assert (out / name).is_file(), name
+    lines = [json.loads(l) for l in (out / "metrics.jsonl").read_text().splitlines()]
+    assert [(l["stage"], l["step"]) for l in lines] == [("imitator", 1), ("imitator", 2), ("imitator", 3), ("latent", 1), ("latent", 2)]
+    assert list((out / "tb").iterdir())
+    # the latent trainer saw the imitator's result
+    assert records[1].result.metrics == {"iterations": 2.0}
+
+    CountTrainer.calls.clear()
+    out_b = tmp_path / "runs" / "b"
+    records_b = run_pipeline(resolve(["latent.name=toy_latent_b"]), PSET, out_b, console=quiet())
+    assert records_b[0].reused and not records_b[1].reused
+    assert CountTrainer.calls == ["latent"]
+    assert records_b[0].workdir == records[0].workdir
+    assert "reused" in (out_b / "stages.json").read_text()
+
+
+def test_interrupt_then_rerun_resumes_and_finishes(tmp_path: Path):
+    CountTrainer.calls.clear()
+    out = tmp_path / "runs" / "x"
+    spec = resolve(["imitator.trainer.params.stop_after=2", "imitator.trainer.params.iterations=5"])
+    # stop_after is part of the trainer params, hence of the key; emulate the user re-running
+    # the same command by reusing the same resolved spec after the interruption.
+    with pytest.raises(PipelineInterrupted):
+        run_pipeline(spec, PSET, out, console=quiet())
+    keys = stage_keys(spec.spec)
+    workdir = tmp_path / "runs" / "artifacts" / f"imitator-{keys['imitator']}"
+    assert (workdir / "checkpoint.pt").is_file() and not (workdir / "DONE.json").exists()
+    with pytest.raises(PipelineInterrupted):  # resumes at 2, runs 3 and 4, interrupted again
+        run_pipeline(spec, PSET, out, console=quiet())
+    records = run_pipeline(spec, PSET, out, console=quiet())
+    assert records[0].result.metrics["iterations"] == 5.0
+    steps = [json.loads(l)["step"] for l in (out / "metrics.jsonl").read_text().splitlines() if '"imitator"' in l]
+    assert steps == [1, 2, 3, 4, 5]
+
+
+def test_stage_with_checkpoint_is_not_trained_and_keyed_by_content(tmp_path: Path):
+    ckpt = tmp_path / "imitator.pt"
+    save_checkpoint(ckpt, {"weights": [1, 2, 3]})
+    text = TOY_SPEC.replace("  trainer: {name: count, params: {iterations: 3}}", f"  checkpoint: {ckpt}")
+    CountTrainer.calls.clear()
+    records = run_pipeline(resolve(text=text), PSET, tmp_path / "runs" / "c", console=quiet())
+    assert CountTrainer.calls == ["latent"] and records[0].result.checkpoint == ckpt
+    key1 = stage_keys(resolve(text=text).spec)["imitator"]
+    save_checkpoint(ckpt, {"weights": [1, 2, 4]})
+    assert stage_keys(resolve(text=text).spec)["imitator"] != key1
