@@ -50,7 +50,10 @@ def register_motion_sources(register: Register) -> None:
 
 @hookspec
 def register_imitators(register: Register) -> None:
-    """Register imitators: ``factory(params, *, env) -> Imitator``."""
+    """Register imitators: ``factory(params, *, skeleton, checkpoint, device) -> Imitator``.
+
+    ``checkpoint`` is the imitator stage's trained checkpoint (None for untrained baselines).
+    """
 
 
 @hookspec

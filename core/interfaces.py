@@ -28,7 +28,7 @@ import torch
 from torch import Tensor
 
 from mocap.skeleton import Skeleton
-from mocap.state import HumanoidState, MotionFrames, Observations, SimState
+from mocap.state import HumanoidState, MotionFrames, Observations, SimState, Trajectories
 
 if TYPE_CHECKING:  # pragma: no cover
     from mocap.pipeline import StageContext
@@ -193,17 +193,16 @@ class MotionSource(ABC):
 
 # ------------------------------------------------------------------------------------- metrics
 class Metric(ABC):
-    """A named measurement over simulated vs reference trajectories.
+    """A named measurement of simulated vs reference trajectories (:class:`mocap.state.Trajectories`).
 
-    ``sim`` and ``ref`` are (T, N, ...) stacked :class:`HumanoidState` fields; the result is a
-    per-episode (N,) tensor in :attr:`unit`.
+    Returns a per-episode (N,) tensor in :attr:`unit` (see :mod:`mocap.metrics` for definitions).
     """
 
     name: str
     unit: str
 
     @abstractmethod
-    def __call__(self, sim: HumanoidState, ref: HumanoidState, fps: float) -> Tensor: ...
+    def __call__(self, tr: Trajectories) -> Tensor: ...
 
 
 # ------------------------------------------------------------------------------------ trainers

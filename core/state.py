@@ -114,3 +114,23 @@ def _take(value: object, ids: Tensor | slice) -> object:
 
 def _to(value: object, device: torch.device | str) -> object:
     return value.to(device) if isinstance(value, Tensor) else value
+
+
+@dataclass
+class Trajectories:
+    """Simulated vs reference body positions of N episodes.
+
+    Attributes:
+        sim, ref: (T, N, B, 3) world body positions, m.
+        fps: frames per second of the sampling.
+        mask: (T, N) bool, frame t of episode n is valid (None: all valid).
+    """
+
+    sim: Tensor
+    ref: Tensor
+    fps: float
+    mask: Tensor | None = None
+
+    def valid(self) -> Tensor:
+        T, N = self.sim.shape[:2]
+        return torch.ones(T, N, dtype=torch.bool, device=self.sim.device) if self.mask is None else self.mask.bool()

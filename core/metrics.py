@@ -1,0 +1,142 @@
+"""Imitation metrics with one definition, explicit units and a protocol id.
+
+Every metric takes a :class:`Trajectories` pair — simulated and reference body positions
+(T, N, B, 3) in metres, world frame, at ``fps`` — and returns a per-episode (N,) tensor. Frames
+where ``mask`` (T, N) is False (after an episode ended) are ignored. Definitions (anchors §15,
+PHC §6.2):
+
+* ``mpjpe_g``: mean over valid frames and bodies of ``||p_sim - p_ref||``, mm.
+* ``mpjpe_l``: the same after subtracting each pose's root (body 0) position, mm.
+* ``pa_mpjpe``: the same after a per-frame similarity Procrustes alignment (scale, rotation,
+  translation) of the simulated pose onto the reference, mm.
+* ``vel_err``: mean ``||(p_{t+1} - p_t)_sim - (p_{t+1} - p_t)_ref||``, mm/frame at ``fps``
+  (PHC's unit; multiply by fps for mm/s).
+* ``acc_err``: mean ``||(p_{t-1} - 2 p_t + p_{t+1})_sim - (...)_ref||``, mm/frame² at ``fps``.
+* ``success``: 1 if at no valid frame after ``grace_frames`` the mean body error exceeds
+  ``threshold`` (0.5 m, PHC/PULSE evaluation), else 0. ``success_linf`` uses the max body error.
+
+``PROTOCOL`` names this set of definitions; reports print it so numbers are never compared
+across different protocols.
+"""
+
+from __future__ import annotations
+
+import torch
+from pydantic import BaseModel, ConfigDict, Field
+from torch import Tensor
+
+from mocap.interfaces import Metric
+from mocap.state import Trajectories
+
+PROTOCOL = "mocap-imitation-v1 (success: mean body error <= 0.5 m at every frame; mm; per-frame units at the stated fps)"
+
+
+def _masked_mean(values: Tensor, mask: Tensor) -> Tensor:
+    """Mean over dim 0 of (T, N) ``values`` where ``mask``; NaN for an episode with no valid frame."""
+    m = mask.to(values.dtype)
+    total = (values * m).sum(0)
+    count = m.sum(0)
+    return torch.where(count > 0, total / count.clamp_min(1), torch.full_like(total, float("nan")))
+
+
+def per_frame_error(sim: Tensor, ref: Tensor) -> Tensor:
+    """(T, N) mean over bodies of the Euclidean error, in the inputs' unit."""
+    return torch.linalg.vector_norm(sim - ref, dim=-1).mean(-1)
+
+
+def mpjpe_global(tr: Trajectories) -> Tensor:
+    return 1000.0 * _masked_mean(per_frame_error(tr.sim, tr.ref), tr.valid())
+
+
+def mpjpe_local(tr: Trajectories) -> Tensor:
+    sim = tr.sim - tr.sim[..., :1, :]
+    ref = tr.ref - tr.ref[..., :1, :]
+    return 1000.0 * _masked_mean(per_frame_error(sim, ref), tr.valid())
+
+
+def procrustes_align(source: Tensor, target: Tensor) -> Tensor:
+    """Similarity-align ``source`` (..., B, 3) onto ``target``: argmin over s, R, t of ||s R x + t - y||.
+
+    Umeyama's closed form: centre both, SVD of the cross-covariance, a reflection fix on the
+    last singular vector, scale = trace(S D) / var(source).
+    """
+    mu_s = source.mean(-2, keepdim=True)
+    mu_t = target.mean(-2, keepdim=True)
+    xs, xt = source - mu_s, target - mu_t
+    cov = xt.transpose(-1, -2) @ xs  # (..., 3, 3) = sum_b y_b x_b^T
+    u, sig, vh = torch.linalg.svd(cov)
+    d = torch.ones_like(sig)
+    d[..., -1] = torch.sign(torch.linalg.det(u @ vh))
+    d[..., -1] = torch.where(d[..., -1] == 0, torch.ones_like(d[..., -1]), d[..., -1])
+    rot = u @ torch.diag_embed(d) @ vh
+    var_s = (xs**2).sum((-1, -2))
+    scale = (sig * d).sum(-1) / var_s.clamp_min(1e-12)
+    return scale[..., None, None] * (xs @ rot.transpose(-1, -2)) + mu_t
+
+
+def pa_mpjpe(tr: Trajectories) -> Tensor:
+    aligned = procrustes_align(tr.sim, tr.ref)
+    return 1000.0 * _masked_mean(per_frame_error(aligned, tr.ref), tr.valid())
+
+
+def velocity_error(tr: Trajectories) -> Tensor:
+    dv = (tr.sim[1:] - tr.sim[:-1]) - (tr.ref[1:] - tr.ref[:-1])
+    valid = tr.valid()
+    return 1000.0 * _masked_mean(torch.linalg.vector_norm(dv, dim=-1).mean(-1), valid[1:] & valid[:-1])
+
+
+def acceleration_error(tr: Trajectories) -> Tensor:
+    def acc(p: Tensor) -> Tensor:
+        return p[:-2] - 2 * p[1:-1] + p[2:]
+
+    da = acc(tr.sim) - acc(tr.ref)
+    valid = tr.valid()
+    return 1000.0 * _masked_mean(torch.linalg.vector_norm(da, dim=-1).mean(-1), valid[2:] & valid[1:-1] & valid[:-2])
+
+
+def success(tr: Trajectories, threshold: float = 0.5, grace_frames: int = 0, reduce: str = "mean") -> Tensor:
+    """(N,) 1.0 where the episode never exceeded ``threshold`` metres (mean or max over bodies)."""
+    err = torch.linalg.vector_norm(tr.sim - tr.ref, dim=-1)
+    per_frame = err.mean(-1) if reduce == "mean" else err.amax(-1)
+    valid = tr.valid().clone()
+    valid[:grace_frames] = False
+    failed = ((per_frame > threshold) & valid).any(0)
+    return (~failed).to(tr.sim.dtype)
+
+
+# ----------------------------------------------------------------------- registered metrics
+class SuccessParams(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    threshold: float = Field(0.5, gt=0, description="m; PHC/PULSE evaluation uses 0.5 (PHC training terminates at 0.25)")
+    grace_frames: int = Field(0, ge=0, description="frames at the start that are not checked")
+
+
+class _FnMetric(Metric):
+    def __init__(self, name: str, unit: str, fn, **kwargs):
+        self.name, self.unit, self._fn, self._kwargs = name, unit, fn, kwargs
+
+    def __call__(self, tr: Trajectories) -> Tensor:  # type: ignore[override]
+        return self._fn(tr, **self._kwargs)
+
+
+def _success_metric(params: SuccessParams, reduce: str) -> Metric:
+    name = "success" if reduce == "mean" else "success_linf"
+    return _FnMetric(name, "fraction", success, threshold=params.threshold, grace_frames=params.grace_frames, reduce=reduce)
+
+
+BUILTIN_METRICS = {
+    "mpjpe_g": ("mm", mpjpe_global, "global mean per-body position error"),
+    "mpjpe_l": ("mm", mpjpe_local, "root-relative mean per-body position error"),
+    "pa_mpjpe": ("mm", pa_mpjpe, "per-body error after similarity Procrustes alignment"),
+    "vel_err": ("mm/frame", velocity_error, "body velocity error per frame at the evaluation fps"),
+    "acc_err": ("mm/frame^2", acceleration_error, "body acceleration error per frame^2 at the evaluation fps"),
+}
+
+
+def make_metric(name: str) -> Metric:
+    unit, fn, _ = BUILTIN_METRICS[name]
+    return _FnMetric(name, unit, fn)
+
+
+def default_metrics() -> list[Metric]:
+    return [make_metric(n) for n in BUILTIN_METRICS] + [_success_metric(SuccessParams(), "mean")]
