@@ -1,0 +1,172 @@
+"""What every motion source shares: the :class:`MotionSet` it returns, bad-file handling, resampling,
+and the ``npz`` source for native clip files.
+
+A motion source (a registered ``motion_source`` component, see :mod:`mocap.motion.plugin`) is
+built from its validated params and converts some format to :class:`~mocap.motion.clip.Clip`
+objects on a given skeleton with ``source.load(skeleton) -> MotionSet``. Every problem with a
+file (missing, truncated, malformed, NaN, zero-length, made for another skeleton) raises
+:class:`~mocap.motion.clip.MotionDataError` whose message names the file and the problem. Sources
+with ``skip_bad`` skip such files instead and list them in :attr:`MotionSet.skipped`; when no file
+loads at all, they raise.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Iterable, Sequence
+
+import numpy as np
+import torch
+from pydantic import BaseModel, ConfigDict, Field
+
+from mocap.interfaces import MotionSource
+from mocap.motion.clip import Clip, MotionDataError
+from mocap.rotations import quat_normalize, quat_slerp
+from mocap.skeleton import Skeleton
+
+
+@dataclass
+class MotionSet:
+    """Clips a source loaded, plus the files it skipped.
+
+    Attributes:
+        clips: the loaded clips, all on one skeleton, in a stable order (sorted file order).
+        skipped: ``(path, reason)`` for every file left out because it was unusable.
+    """
+
+    clips: list[Clip] = field(default_factory=list)
+    skipped: list[tuple[str, str]] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.clips)
+
+    @property
+    def names(self) -> list[str]:
+        return [c.name for c in self.clips]
+
+    def extend(self, other: "MotionSet") -> "MotionSet":
+        """Append another set's clips and skipped files (returns ``self``)."""
+        self.clips.extend(other.clips)
+        self.skipped.extend(other.skipped)
+        return self
+
+
+def load_each(
+    items: Iterable[tuple[Path, str]],
+    load_one: Callable[[Path, str], Clip],
+    *,
+    skip_bad: bool,
+    what: str,
+) -> MotionSet:
+    """Load ``(path, clip_name)`` items with ``load_one``; skip or raise on :class:`MotionDataError`.
+
+    With ``skip_bad`` a bad file lands in :attr:`MotionSet.skipped` with the error message as the
+    reason; if nothing at all loads, a :class:`MotionDataError` lists every skipped file.
+    """
+    out = MotionSet()
+    for path, name in items:
+        try:
+            out.clips.append(load_one(path, name))
+        except MotionDataError as exc:
+            if not skip_bad:
+                raise
+            out.skipped.append((str(path), str(exc)))
+    if not out.clips:
+        if out.skipped:
+            listed = "; ".join(reason for _, reason in out.skipped)
+            raise MotionDataError(f"no {what} clip could be loaded ({len(out.skipped)} file(s) skipped): {listed}")
+        raise MotionDataError(f"no {what} files found")
+    return out
+
+
+def expand_paths(paths: Sequence[Path], suffix: str, ignore: Callable[[Path], bool] | None = None) -> list[tuple[Path, str]]:
+    """Files and directories -> ``(file, clip name)`` pairs, in the given order, directories sorted.
+
+    A file keeps its path (even if missing: the loader reports it) and is named by its stem. A
+    directory contributes every ``*suffix`` file below it (recursively), named by its path relative
+    to the directory without the suffix (``CMU/01/01_01_poses``), so that names are unique.
+    """
+    out: list[tuple[Path, str]] = []
+    for p in paths:
+        p = Path(p).expanduser()
+        if p.is_dir():
+            for f in sorted(p.rglob(f"*{suffix}")):
+                if f.is_file() and not (ignore and ignore(f)):
+                    out.append((f, f.relative_to(p).with_suffix("").as_posix()))
+        else:
+            out.append((p, p.stem))
+    return out
+
+
+def check_finite(path: Path | str, what: str, arr: np.ndarray) -> None:
+    """Raise :class:`MotionDataError` naming ``path`` and the first frame holding NaN/inf in ``arr`` (T, ...)."""
+    if not np.all(np.isfinite(arr)):
+        bad = int(np.argwhere(~np.isfinite(arr.reshape(arr.shape[0], -1)))[0, 0])
+        raise MotionDataError(f"{path}: {what} contains NaN or infinite values (first at frame {bad})")
+
+
+def resample(
+    src_times: np.ndarray,
+    root_pos: np.ndarray,
+    root_rot: np.ndarray,
+    joint_rot: np.ndarray,
+    dst_times: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Resample a trajectory at ``dst_times``: positions by linear interpolation, rotations by slerp.
+
+    ``src_times`` (T,) is increasing; ``dst_times`` (T',) lies within ``[src_times[0], src_times[-1]]``
+    (values outside are clamped). Shapes: root_pos (T, 3), root_rot (T, 4), joint_rot (T, J, 4).
+    """
+    t = np.clip(np.asarray(dst_times, dtype=np.float64), src_times[0], src_times[-1])
+    i0 = np.clip(np.searchsorted(src_times, t, side="right") - 1, 0, len(src_times) - 2)
+    span = src_times[i0 + 1] - src_times[i0]
+    alpha = np.clip((t - src_times[i0]) / span, 0.0, 1.0)
+    pos = root_pos[i0] + alpha[:, None] * (root_pos[i0 + 1] - root_pos[i0])
+    a = torch.from_numpy(alpha)
+    rot = quat_slerp(torch.from_numpy(root_rot[i0]), torch.from_numpy(root_rot[i0 + 1]), a)
+    jrot = quat_slerp(torch.from_numpy(joint_rot[i0]), torch.from_numpy(joint_rot[i0 + 1]), a[:, None])
+    return pos, quat_normalize(rot).numpy(), quat_normalize(jrot).numpy()
+
+
+def check_clip_skeleton(clip: Clip, skeleton: Skeleton, where: str) -> None:
+    """Raise :class:`MotionDataError` if ``clip`` was made for another skeleton than ``skeleton``."""
+    if clip.skeleton != skeleton.name:
+        raise MotionDataError(f"{where}: clip {clip.name!r} is for skeleton {clip.skeleton!r}, not {skeleton.name!r}")
+    clip.check(skeleton.num_bodies)
+
+
+# ------------------------------------------------------------------------------- native clips
+class NpzParams(BaseModel):
+    """Native ``.npz`` clip files (the format documented in :mod:`mocap.motion.clip`)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    paths: list[Path] = Field(min_length=1, description="clip files, or directories searched recursively for *.npz")
+    skip_bad: bool = Field(default=True, description="skip unusable files (listed in the motion set) instead of failing")
+
+
+class NpzSource(MotionSource):
+    """Loads native clips; each must name the skeleton it is loaded onto."""
+
+    def __init__(self, params: NpzParams):
+        self.params = params
+
+    @property
+    def default_humanoid(self) -> str | None:
+        """The skeleton named by the first readable clip (what the CLI loads them onto by default)."""
+        for path, _ in expand_paths(self.params.paths, ".npz"):
+            try:
+                with np.load(path, allow_pickle=False) as data:
+                    return str(data["skeleton"])
+            except Exception:  # noqa: BLE001 - any unreadable file: try the next one
+                continue
+        return None
+
+    def load(self, skeleton: Skeleton) -> MotionSet:
+        def one(path: Path, name: str) -> Clip:
+            clip = Clip.load(path)
+            check_clip_skeleton(clip, skeleton, str(path))
+            return clip
+
+        return load_each(expand_paths(self.params.paths, ".npz"), one, skip_bad=self.params.skip_bad, what="native npz")
