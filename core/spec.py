@@ -309,8 +309,37 @@ def iter_components(spec: Spec) -> Iterator[tuple[str, str, ComponentRef]]:
             yield f"eval.metrics.{i}", "metric", metric
 
 
-def validate_document(doc: dict[str, Any], plugins: PluginSet, source: str = "<spec>") -> ResolvedSpec:
-    """Validate a merged mapping against the structure and every component's params model."""
+def resolve_relative_paths(model: BaseModel, base_dir: Path) -> BaseModel:
+    """Make every relative ``Path`` in a params model (nested models and lists included) relative
+    to ``base_dir`` (the directory of the spec file that is run), so a spec works from any cwd."""
+
+    def fix(value: Any) -> Any:
+        if isinstance(value, Path):
+            value = value.expanduser()
+            return value if value.is_absolute() else (base_dir / value).resolve()
+        if isinstance(value, BaseModel):
+            for name in type(value).model_fields:
+                setattr(value, name, fix(getattr(value, name)))
+            return value
+        if isinstance(value, list):
+            return [fix(v) for v in value]
+        if isinstance(value, tuple):
+            return tuple(fix(v) for v in value)
+        if isinstance(value, dict):
+            return {k: fix(v) for k, v in value.items()}
+        return value
+
+    return fix(model)
+
+
+def validate_document(
+    doc: dict[str, Any], plugins: PluginSet, source: str = "<spec>", base_dir: Path | None = None
+) -> ResolvedSpec:
+    """Validate a merged mapping against the structure and every component's params model.
+
+    Relative paths inside component params are resolved against ``base_dir`` (default: cwd).
+    """
+    base_dir = Path(base_dir) if base_dir is not None else Path.cwd()
     try:
         spec = Spec.model_validate(doc)
     except ValidationError as exc:
@@ -335,6 +364,8 @@ def validate_document(doc: dict[str, Any], plugins: PluginSet, source: str = "<s
         except ValueError as exc:
             issues.append(SpecIssue(f"{path}.params", str(exc)))
             continue
+        if model is not None:
+            model = resolve_relative_paths(model, base_dir)
         resolved[path] = model
         ref.params = model.model_dump(mode="json") if model is not None else {}
     if spec.latent is not None and spec.imitator is None and spec.latent.checkpoint is None:
@@ -349,7 +380,7 @@ def load_spec(path: str | Path, plugins: PluginSet, overrides: list[str] | None 
     doc = load_document(Path(path))
     if overrides:
         doc = apply_overrides(doc, overrides)
-    return validate_document(doc, plugins, source=str(path))
+    return validate_document(doc, plugins, source=str(path), base_dir=Path(path).resolve().parent)
 
 
 def load_spec_text(text: str, plugins: PluginSet, source: str = "<spec>", overrides: list[str] | None = None) -> ResolvedSpec:

@@ -24,8 +24,8 @@ def issues(text: str, overrides=None) -> list[str]:
 
 def test_valid_spec_fills_component_defaults():
     resolved = load_spec_text(TOY_SPEC, PSET)
-    assert resolved.spec.imitator.params == {"hidden": 16, "optim": {"lr": 0.01, "schedule": "constant"}}
-    assert resolved.spec.latent.params == {"hidden": 8, "optim": {"lr": 0.001, "schedule": "constant"}}
+    assert resolved.spec.imitator.params == {"hidden": 16, "optim": {"lr": 0.01, "schedule": "constant"}, "files": []}
+    assert resolved.spec.latent.params == {"hidden": 8, "optim": {"lr": 0.001, "schedule": "constant"}, "files": []}
     assert resolved.params["imitator"].optim.lr == 0.01
     assert resolved.params["latent.trainer"].iterations == 2
     # the resolved YAML validates again to the same spec
@@ -108,6 +108,15 @@ def test_checkpoint_paths_are_relative_to_the_spec_file(tmp_path: Path):
     (tmp_path / "sub" / "s.yaml").write_text(TOY_SPEC.replace("  trainer: {name: count, params: {iterations: 2}}", "  checkpoint: ckpt/latent.pt"))
     spec = load_spec(tmp_path / "sub" / "s.yaml", PSET).spec
     assert spec.latent.checkpoint == (tmp_path / "sub" / "ckpt" / "latent.pt").resolve()
+
+
+def test_relative_paths_in_params_resolve_against_the_spec_file(tmp_path: Path, monkeypatch):
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "s.yaml").write_text(TOY_SPEC.replace("hidden: 16,", "hidden: 16, files: [data/a.npz, /abs/b.npz],"))
+    monkeypatch.chdir(tmp_path)
+    resolved = load_spec("sub/s.yaml", PSET)
+    assert resolved.params["imitator"].files == [(tmp_path / "sub" / "data" / "a.npz").resolve(), Path("/abs/b.npz")]
+    assert resolved.spec.imitator.params["files"][0] == str((tmp_path / "sub" / "data" / "a.npz").resolve())
 
 
 def test_deep_merge_properties():

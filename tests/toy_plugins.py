@@ -23,6 +23,7 @@ class ToyModelParams(BaseModel):
     model_config = ConfigDict(extra="forbid")
     hidden: int = Field(8, ge=1)
     optim: Optim = Field(default_factory=Optim)
+    files: list[Path] = Field(default_factory=list)
 
 
 class CountParams(BaseModel):
