@@ -178,6 +178,9 @@ def load_plugins(
             package = dist.metadata["Name"] if dist is not None else "?"
             version = dist.version if dist is not None else "?"
             candidates.append((ep.name, package, version, ep.load))
+    extra = list(extra)
+    local_names = {name for name, _ in extra}
+    candidates = [c for c in candidates if c[0] not in local_names]  # a local plugin replaces an installed one
     for name, obj in extra:
         module = getattr(obj, "__name__", type(obj).__name__)
         candidates.append((name, f"<local:{module}>", "-", lambda obj=obj: obj))
@@ -187,12 +190,14 @@ def load_plugins(
             continue
         if name in block:
             continue
+        registered = False
         try:
             plugin = loader()
             pm.register(plugin, name=name)
+            registered = True
             pm.check_pending()
         except Exception as exc:  # noqa: BLE001 - isolate every plugin
-            if pm.get_plugin(name) is not None:
+            if registered:
                 pm.unregister(name=name)
             pset.failures.append(PluginFailure(name, package, _one_line(exc)))
             continue

@@ -1,0 +1,1 @@
+"""Reinforcement learning: the vectorized-environment protocol, networks, normalizers and PPO."""

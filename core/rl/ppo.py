@@ -1,0 +1,550 @@
+"""Proximal Policy Optimization (Schulman et al. 2017, arXiv:1707.06347) on a :class:`~mocap.rl.env.VecEnv`.
+
+One file, read top to bottom: the loss math as small pure functions (each citing its formula),
+the parameters, then :class:`PPOTrainer` (rollout → GAE → minibatch epochs → log → checkpoint).
+
+Defaults are the CPU recipe that learned a DeepMimic walk on 2 cores (design/FEASIBILITY.md §4);
+each parameter's description gives PHC's value (rl_games config) where it differs.
+
+Checkpoint ``<workdir>/ppo.pt`` holds everything needed to continue bit-exactly on the same
+device: network, optimizer, normalizers, ``env.state_dict()``, the env's current observation,
+torch/numpy/python RNG states, counters and the episode-statistics window. A run resumed from it
+produces the same weights as an uninterrupted one. The final policy goes to
+``<workdir>/policy.pt`` (:func:`mocap.rl.networks.save_policy`; load with ``load_policy``).
+"""
+
+from __future__ import annotations
+
+import math
+import random
+import time
+from collections import deque
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import torch
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+from torch import Tensor
+
+from mocap.checkpoint import load_checkpoint, save_checkpoint
+from mocap.interfaces import Box, MultiDiscrete, StageResult, Trainer
+from mocap.rl.networks import ActorCritic, save_policy
+
+CHECKPOINT_FORMAT = "mocap.rl.ppo/1"
+CHECKPOINT_NAME = "ppo.pt"
+POLICY_NAME = "policy.pt"
+EPISODE_WINDOW = 100
+
+
+# ------------------------------------------------------------------------------------ the math
+def compute_gae(
+    rewards: Tensor,
+    values: Tensor,
+    next_values: Tensor,
+    terminated: Tensor,
+    dones: Tensor,
+    gamma: float,
+    lam: float,
+) -> tuple[Tensor, Tensor]:
+    """Generalized advantage estimation (Schulman et al. 2016, arXiv:1506.02438, eq. 16).
+
+    All inputs are (T, N) over T steps of N envs:
+
+    * ``values[t]`` = V(s_t);
+    * ``next_values[t]`` = V(s'_t), the state the step reached *before* any auto-reset: the
+      value of ``final_obs`` for envs that finished at step t, else V(s_{t+1});
+    * ``terminated[t]``: the episode ended by failure/success, so V(s'_t) is not used;
+    * ``dones[t]`` = terminated or truncated: the advantage recursion stops there.
+
+    ::
+
+        δ_t = r_t + γ (1 − term_t) V(s'_t) − V(s_t)
+        A_t = δ_t + γ λ (1 − done_t) A_{t+1}           (A_T = 0)
+            = Σ_{l=0}^{k} (γλ)^l δ_{t+l},   k = steps to the episode end (or the rollout end)
+
+    A truncated (time-limit) episode therefore bootstraps from V(final_obs); a terminated one
+    does not. Returns ``(advantages, returns)`` with ``returns = advantages + values`` (the
+    TD(λ) value targets).
+    """
+    not_term = 1.0 - terminated.to(rewards.dtype)
+    not_done = 1.0 - dones.to(rewards.dtype)
+    deltas = rewards + gamma * not_term * next_values - values
+    advantages = torch.zeros_like(rewards)
+    last = torch.zeros_like(rewards[0])
+    for t in range(rewards.shape[0] - 1, -1, -1):
+        last = deltas[t] + gamma * lam * not_done[t] * last
+        advantages[t] = last
+    return advantages, advantages + values
+
+
+def clipped_surrogate(ratio: Tensor, advantages: Tensor, clip: float) -> Tensor:
+    """PPO's clipped surrogate objective per sample (Schulman et al. 2017, eq. 7), to maximize::
+
+        L^CLIP = min(r A, clip(r, 1 − ε, 1 + ε) A),   r = π(a|s) / π_old(a|s)
+
+    It is a pessimistic bound: never above the unclipped ``r A``.
+    """
+    return torch.minimum(ratio * advantages, ratio.clamp(1.0 - clip, 1.0 + clip) * advantages)
+
+
+def value_loss(values: Tensor, old_values: Tensor, returns: Tensor, clip: float | None = None) -> Tensor:
+    """Mean squared value error ``½ (V − R)²``; with ``clip`` = ε the PPO2 clipped form::
+
+        ½ max((V − R)², (V_old + clip(V − V_old, −ε, ε) − R)²)
+
+    (value clipping as in OpenAI baselines' ppo2; PHC does not clip values).
+    """
+    err = (values - returns).square()
+    if clip is not None:
+        clipped = old_values + (values - old_values).clamp(-clip, clip)
+        err = torch.maximum(err, (clipped - returns).square())
+    return 0.5 * err.mean()
+
+
+def bounds_loss(mean: Tensor, soft_bound: float) -> Tensor:
+    """Per-sample penalty on a Gaussian mean leaving ``[−b, b]`` (rl_games' bound loss, used by PHC)::
+
+        Σ_i max(μ_i − b, 0)² + min(μ_i + b, 0)²
+
+    Zero inside the bound, quadratic outside. Returns (B,).
+    """
+    high = (mean - soft_bound).clamp(min=0.0).square()
+    low = (mean + soft_bound).clamp(max=0.0).square()
+    return (high + low).sum(-1)
+
+
+def explained_variance(pred: Tensor, target: Tensor) -> float:
+    """``1 − Var(target − pred) / Var(target)`` (1: perfect, 0: no better than a constant)."""
+    var = target.var(unbiased=False)
+    return float("nan") if var == 0 else float(1.0 - (target - pred).var(unbiased=False) / var)
+
+
+# ---------------------------------------------------------------------------------- parameters
+class PPOParams(BaseModel):
+    """PPO hyper-parameters (defaults: 2-core CPU recipe; PHC's rl_games values in the descriptions)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    num_envs: int = Field(128, ge=1, description="parallel envs (PHC: 1536)")
+    horizon: int = Field(64, ge=1, description="steps per env per iteration; batch = num_envs × horizon (PHC: 32)")
+    total_env_steps: int = Field(10_000_000, ge=1, description="training budget in env steps (rounded up to whole iterations)")
+    epochs: int = Field(4, ge=1, description="passes over each batch (PHC: 6 mini-epochs)")
+    minibatch_size: int = Field(
+        2048, ge=1, description="samples per gradient step; ≤ batch; a remainder is dropped each epoch (PHC: 16384)"
+    )
+    lr: float = Field(3e-4, gt=0, description="Adam learning rate (PHC: 2e-5)")
+    lr_schedule: Literal["constant", "linear"] = Field(
+        "constant", description="'linear' anneals lr to 0 over the budget (PHC: constant)"
+    )
+    gamma: float = Field(0.95, ge=0, le=1, description="discount γ (PHC: 0.99)")
+    gae_lambda: float = Field(0.95, ge=0, le=1, description="GAE λ (PHC: 0.95)")
+    clip: float = Field(0.2, gt=0, description="PPO ratio clip ε (PHC: 0.2)")
+    value_clip: float | None = Field(None, gt=0, description="value clipping ε; None = no value clipping (PHC: none)")
+    value_coef: float = Field(
+        0.5,
+        ge=0,
+        description="critic loss weight; with separate networks and Adam it matters mainly through the shared "
+        "grad-norm clip (PHC: 5)",
+    )
+    entropy_coef: float = Field(0.0, ge=0, description="entropy bonus weight (PHC: 0)")
+    bounds_coef: float = Field(0.0, ge=0, description="weight of the bound loss on the Gaussian mean (PHC: 10)")
+    soft_bound: float = Field(1.0, gt=0, description="the bound loss penalizes |μ_i| beyond this (PHC: 1.0)")
+    max_grad_norm: float | None = Field(1.0, gt=0, description="global gradient-norm clip; None = off (PHC: 50)")
+    normalize_advantage: bool = Field(True, description="standardize advantages over the batch (PHC: yes)")
+    normalize_obs: bool = Field(True, description="running mean/std observation normalization, saved with the policy (PHC: yes)")
+    obs_clip: float = Field(5.0, gt=0, description="clip of normalized observations")
+    normalize_value: bool = Field(
+        False,
+        description="the critic regresses value targets standardized by their running mean/std (updated once per "
+        "batch; no PopArt output rescaling) (PHC: yes)",
+    )
+    actor_hidden: list[int] = Field(default_factory=lambda: [512, 256], description="actor MLP hidden sizes (PHC: [1024, 512])")
+    critic_hidden: list[int] = Field(default_factory=lambda: [512, 256], description="critic MLP hidden sizes (PHC: [1024, 512])")
+    activation: Literal["elu", "relu", "tanh", "silu", "gelu"] = Field("elu", description="hidden activation (PHC: relu)")
+    log_std_init: float = Field(-1.2, description="initial log σ of the Gaussian head (PHC: −2.9, fixed)")
+    learn_std: bool = Field(True, description="train log σ (PHC: no, fixed σ)")
+    torch_threads: int | None = Field(
+        1,
+        ge=1,
+        description="torch intra-op threads for this stage (None: keep the process setting, i.e. the spec's "
+        "torch_threads or torch's default). 1 is safe whenever anything else shares the cores; on an otherwise idle "
+        "2-core machine 2 threads make the update about 1.75x faster, but under contention they were several times "
+        "slower than 1 (30x in design/FEASIBILITY.md §3)",
+    )
+    checkpoint_every: int = Field(10, ge=1, description="iterations between checkpoints (also saved at the end and on Ctrl-C)")
+    print_every: int = Field(10, ge=1, description="iterations between progress lines when the console is not a terminal")
+
+    @model_validator(mode="after")
+    def _minibatch_fits(self) -> "PPOParams":
+        if self.minibatch_size > self.num_envs * self.horizon:
+            raise ValueError(
+                f"minibatch_size {self.minibatch_size} exceeds the batch num_envs × horizon = {self.num_envs * self.horizon}"
+            )
+        return self
+
+    @property
+    def batch_size(self) -> int:
+        return self.num_envs * self.horizon
+
+    @property
+    def iterations(self) -> int:
+        return math.ceil(self.total_env_steps / self.batch_size)
+
+
+# -------------------------------------------------------------------------------------- trainer
+def _rng_state() -> dict[str, Any]:
+    state = {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()}
+    if torch.cuda.is_available():  # pragma: no cover - no GPU in CI
+        state["cuda"] = torch.cuda.get_rng_state_all()
+    return state
+
+
+def _set_rng_state(state: dict[str, Any]) -> None:
+    torch.set_rng_state(state["torch"])
+    np.random.set_state(state["numpy"])
+    random.setstate(state["python"])
+    if "cuda" in state and torch.cuda.is_available():  # pragma: no cover
+        torch.cuda.set_rng_state_all(state["cuda"])
+
+
+class PPOTrainer(Trainer):
+    """Trains an :class:`ActorCritic` on ``ctx.make_rl_env(num_envs)`` with PPO; resumes from ``ppo.pt``."""
+
+    def __init__(self, params: PPOParams | None = None):
+        self.params = params or PPOParams()
+
+    # ----------------------------------------------------------------------------- building
+    def build_model(self, obs_dim: int, action_space: Any) -> ActorCritic:
+        p = self.params
+        return ActorCritic(
+            obs_dim,
+            action_space,
+            actor_hidden=p.actor_hidden,
+            critic_hidden=p.critic_hidden,
+            activation=p.activation,
+            log_std_init=p.log_std_init,
+            learn_std=p.learn_std,
+            normalize_obs=p.normalize_obs,
+            obs_clip=p.obs_clip,
+            normalize_value=p.normalize_value,
+        )
+
+    # -------------------------------------------------------------------------------- run
+    def run(self, ctx: Any) -> StageResult:
+        p = self.params
+        if p.torch_threads is not None:
+            torch.set_num_threads(p.torch_threads)
+        device = torch.device(getattr(ctx, "device", "cpu"))
+        workdir = Path(ctx.workdir)
+        workdir.mkdir(parents=True, exist_ok=True)
+        ckpt_path = workdir / CHECKPOINT_NAME
+
+        torch.manual_seed(ctx.seed)
+        np.random.seed(ctx.seed % 2**32)
+        random.seed(ctx.seed)
+        env = ctx.make_rl_env(p.num_envs)
+        if env.num_envs != p.num_envs:
+            raise ValueError(f"the env has {env.num_envs} envs, PPO asked for {p.num_envs}")
+        space = env.action_space
+        model = self.build_model(env.obs_dim, space).to(device)
+        optimizer = torch.optim.Adam([q for q in model.parameters() if q.requires_grad], lr=p.lr)
+        window: dict[str, deque[float]] = {}
+
+        iteration, env_steps = 0, 0
+        if ckpt_path.is_file():
+            ck = load_checkpoint(ckpt_path, map_location=device)
+            if ck.get("format") != CHECKPOINT_FORMAT:
+                raise ValueError(f"{ckpt_path}: not a PPO checkpoint (format {ck.get('format')!r})")
+            model.load_state_dict(ck["model"])
+            optimizer.load_state_dict(ck["optimizer"])
+            env.load_state_dict(ck["env"])
+            obs = ck["obs"].to(device)
+            iteration, env_steps = int(ck["iteration"]), int(ck["env_steps"])
+            window = {k: deque(v, maxlen=EPISODE_WINDOW) for k, v in ck["episode_window"].items()}
+            _set_rng_state(ck["rng"])
+            ctx.log.truncate_after(iteration)
+            ctx.console.print(f"ppo: resuming at iteration {iteration} ({env_steps:,} env steps)")
+        else:
+            ctx.log.truncate_after(0)  # lines from a run that crashed before its first checkpoint
+            obs = env.reset().to(device)
+            if p.normalize_obs:
+                model.obs_norm.update(obs)  # first statistics from the initial states
+
+        env_device = torch.device(getattr(env, "device", "cpu"))  # actions go back to the env's device
+        low = high = None
+        if isinstance(space, Box) and (math.isfinite(space.low) or math.isfinite(space.high)):
+            low, high = space.low, space.high
+        act_shape = (len(space.nvec),) if isinstance(space, MultiDiscrete) else tuple(space.shape)
+        act_dtype = torch.long if isinstance(space, MultiDiscrete) else torch.float32
+        T, N = p.horizon, p.num_envs
+        last_stats: dict[str, float] = {}
+        t_start = time.perf_counter()
+        steps_at_start = env_steps
+
+        def save(final: bool = False) -> None:
+            save_checkpoint(
+                ckpt_path,
+                {
+                    "format": CHECKPOINT_FORMAT,
+                    "iteration": iteration,
+                    "env_steps": env_steps,
+                    "model": model.state_dict(),
+                    "policy_config": model.config,
+                    "optimizer": optimizer.state_dict(),
+                    "env": env.state_dict(),
+                    "obs": obs.detach().cpu(),
+                    "rng": _rng_state(),
+                    "episode_window": {k: list(v) for k, v in window.items()},
+                    "params": p.model_dump(mode="json"),
+                    "finished": final,
+                },
+                spec_yaml=ctx.spec_yaml(),
+            )
+
+        progress = _Progress(ctx.console, p.iterations, p.print_every)
+        try:
+            while iteration < p.iterations:
+                # ---------------------------------------------------------------- rollout
+                t0 = time.perf_counter()
+                if p.lr_schedule == "linear":
+                    for group in optimizer.param_groups:
+                        group["lr"] = p.lr * (1.0 - iteration / p.iterations)
+                b_obs = torch.zeros((T, N, env.obs_dim), device=device)
+                b_act = torch.zeros((T, N, *act_shape), dtype=act_dtype, device=device)
+                b_logp = torch.zeros((T, N), device=device)
+                b_val = torch.zeros((T, N), device=device)
+                b_rew = torch.zeros((T, N), device=device)
+                b_next_val = torch.zeros((T, N), device=device)
+                b_term = torch.zeros((T, N), dtype=torch.bool, device=device)
+                b_done = torch.zeros((T, N), dtype=torch.bool, device=device)
+                info_sums: dict[str, float] = {}
+                finished = 0
+                model.eval()
+                with torch.no_grad():
+                    for t in range(T):
+                        b_obs[t] = obs
+                        action, logp, value = model.act(obs)
+                        b_act[t], b_logp[t], b_val[t] = action, logp, value
+                        env_action = action if low is None else action.clamp(low, high)
+                        res = env.step(env_action.to(env_device))
+                        obs = res.obs.to(device).float()
+                        b_rew[t] = res.reward.to(device)
+                        term = res.terminated.to(device).bool()
+                        trunc = res.truncated.to(device).bool() & ~term
+                        b_term[t], b_done[t] = term, term | trunc
+                        if t > 0:
+                            b_next_val[t - 1] = torch.where(b_done[t - 1], b_next_val[t - 1], value)
+                        if trunc.any():  # bootstrap time-limit truncations from V(final_obs)
+                            b_next_val[t, trunc] = model.value(res.final_obs.to(device).float()[trunc])
+                        for key, val in res.episodes.items():
+                            vals = val.detach().float().cpu().tolist()
+                            window.setdefault(key, deque(maxlen=EPISODE_WINDOW)).extend(vals)
+                        finished += int(b_done[t].sum())
+                        for key, val in res.info.items():
+                            v = float(val.float().mean()) if isinstance(val, Tensor) else float(val)
+                            info_sums[key] = info_sums.get(key, 0.0) + v
+                    last_value = model.value(obs)
+                    b_next_val[T - 1] = torch.where(b_done[T - 1], b_next_val[T - 1], last_value)
+                    advantages, returns = compute_gae(b_rew, b_val, b_next_val, b_term, b_done, p.gamma, p.gae_lambda)
+                env_steps += T * N
+                t_rollout = time.perf_counter() - t0
+
+                # ----------------------------------------------------------------- update
+                t1 = time.perf_counter()
+                stats = self._update(model, optimizer, b_obs, b_act, b_logp, b_val, advantages, returns)
+                if p.normalize_obs:  # after the update, so that rollout and update saw the same statistics
+                    model.obs_norm.update(b_obs)
+                t_update = time.perf_counter() - t1
+                iteration += 1
+
+                # ---------------------------------------------------------------- logging
+                elapsed = time.perf_counter() - t_start
+                log = {
+                    "env_steps": float(env_steps),
+                    **stats,
+                    "explained_variance": explained_variance(b_val.flatten(), returns.flatten()),
+                    "value_mean": float(b_val.mean()),
+                    "return_target_mean": float(returns.mean()),
+                    "reward_mean": float(b_rew.mean()),
+                    "lr": optimizer.param_groups[0]["lr"],
+                    "episodes_finished": float(finished),
+                    "time/rollout_s": t_rollout,
+                    "time/update_s": t_update,
+                    "steps_per_s": T * N / max(t_rollout + t_update, 1e-9),
+                    "rollout_steps_per_s": T * N / max(t_rollout, 1e-9),
+                    "steps_per_s_run": (env_steps - steps_at_start) / max(elapsed, 1e-9),
+                }
+                if model.log_std is not None:
+                    log["std"] = float(model.log_std.detach().exp().mean())
+                for key, vals in window.items():
+                    if vals:
+                        log[f"episode/{key}"] = float(np.mean(vals))
+                for key, total in info_sums.items():
+                    log[f"env/{key}"] = total / T
+                hook = getattr(env, "after_iteration", None)
+                if hook is not None:  # e.g. periodic evaluation for hard-negative mining
+
+                    def policy_fn(o: Tensor) -> Tensor:
+                        model.eval()
+                        with torch.no_grad():
+                            return model.mean_action(o.to(device).float()).to(env_device)
+
+                    for key, val in (hook(iteration, policy_fn) or {}).items():
+                        log[f"eval/{key}"] = float(val)
+                ctx.log.log(iteration, **log)
+                last_stats = log
+                progress.update(iteration, env_steps, log)
+
+                stop = ctx.should_stop()
+                if stop or iteration % p.checkpoint_every == 0 or iteration >= p.iterations:
+                    save(final=iteration >= p.iterations)
+                if stop:
+                    ctx.console.print(f"ppo: stopped at iteration {iteration}; checkpoint {ckpt_path}")
+                    return StageResult(checkpoint=ckpt_path, metrics=_summary(last_stats, iteration, env_steps))
+        finally:
+            progress.close()
+            env.close()
+
+        if not last_stats:  # the checkpoint was already at the end (e.g. a crash before policy.pt)
+            last_stats = {f"episode/{k}": float(np.mean(v)) for k, v in window.items() if v}
+        metrics = _summary(last_stats, iteration, env_steps)
+        policy_path = workdir / POLICY_NAME
+        save_policy(policy_path, model, extra={"trainer": "ppo", "metrics": metrics}, spec_yaml=ctx.spec_yaml())
+        return StageResult(checkpoint=policy_path, metrics=metrics)
+
+    # ------------------------------------------------------------------------------ update
+    def _update(
+        self,
+        model: ActorCritic,
+        optimizer: torch.optim.Optimizer,
+        b_obs: Tensor,
+        b_act: Tensor,
+        b_logp: Tensor,
+        b_val: Tensor,
+        advantages: Tensor,
+        returns: Tensor,
+    ) -> dict[str, float]:
+        """``epochs`` passes of shuffled minibatches over the rollout; returns averaged diagnostics."""
+        p = self.params
+        B = b_logp.numel()
+        obs = b_obs.reshape(B, -1)
+        act = b_act.reshape(B, *b_act.shape[2:])
+        old_logp = b_logp.reshape(B)
+        adv = advantages.reshape(B)
+        ret = returns.reshape(B)
+        old_val = b_val.reshape(B)
+        if p.normalize_advantage:
+            adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+        if p.normalize_value:
+            # the critic regresses standardized targets; statistics updated once per batch
+            model.value_norm.update(ret)
+            ret_t = model.value_norm.normalize(ret)
+            old_val_t = model.value_norm.normalize(old_val)
+        else:
+            ret_t, old_val_t = ret, old_val
+        params = [q for q in model.parameters() if q.requires_grad]
+        n_mb = B // p.minibatch_size
+        sums: dict[str, float] = {}
+        model.train()
+        for _ in range(p.epochs):
+            perm = torch.randperm(B, device=obs.device)
+            for i in range(n_mb):
+                idx = perm[i * p.minibatch_size : (i + 1) * p.minibatch_size]
+                out = model.train_forward(obs[idx], act[idx])
+                log_ratio = out.log_prob - old_logp[idx]
+                ratio = log_ratio.exp()
+                pg_loss = -clipped_surrogate(ratio, adv[idx], p.clip).mean()
+                v_loss = value_loss(out.value_raw, old_val_t[idx], ret_t[idx], p.value_clip)
+                entropy = out.entropy.mean()
+                b_loss = bounds_loss(out.mean, p.soft_bound).mean() if out.mean is not None else pg_loss.new_zeros(())
+                loss = pg_loss + p.value_coef * v_loss - p.entropy_coef * entropy + p.bounds_coef * b_loss
+                optimizer.zero_grad(set_to_none=True)
+                loss.backward()
+                # global-norm clip (max_grad_norm None: inf, i.e. only measure the norm)
+                grad_norm = torch.nn.utils.clip_grad_norm_(params, p.max_grad_norm or math.inf)
+                optimizer.step()
+                with torch.no_grad():
+                    # k3 estimator of KL(π_old || π): E[(r − 1) − log r] (Schulman, "Approximating KL divergence")
+                    approx_kl = ((ratio - 1) - log_ratio).mean()
+                    clip_frac = ((ratio - 1).abs() > p.clip).float().mean()
+                for key, val in (
+                    ("loss/policy", pg_loss),
+                    ("loss/value", v_loss),
+                    ("loss/entropy", entropy),
+                    ("loss/bounds", b_loss),
+                    ("loss/total", loss),
+                    ("approx_kl", approx_kl),
+                    ("clip_fraction", clip_frac),
+                    ("grad_norm", grad_norm),
+                ):
+                    sums[key] = sums.get(key, 0.0) + float(val.detach())
+        model.eval()
+        steps = max(p.epochs * n_mb, 1)
+        return {k: v / steps for k, v in sums.items()}
+
+
+def _summary(stats: dict[str, float], iteration: int, env_steps: int) -> dict[str, float]:
+    out = {"iterations": float(iteration), "env_steps": float(env_steps)}
+    for key, value in stats.items():
+        if key.startswith("episode/") or key in ("explained_variance", "steps_per_s_run", "approx_kl"):
+            out[key] = float(value)
+    return out
+
+
+class _Progress:
+    """A live rich progress bar on a terminal; a plain line every ``every`` iterations otherwise."""
+
+    def __init__(self, console: Any, total: int, every: int):
+        self.console = console
+        self.total = total
+        self.every = every
+        self.bar: Any = None
+        self.task: Any = None
+        if console is not None and getattr(console, "is_terminal", False):
+            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+            self.bar = Progress(
+                TextColumn("[bold]ppo[/]"),
+                BarColumn(),
+                MofNCompleteColumn(),
+                TimeRemainingColumn(),
+                TextColumn("{task.description}"),
+                console=console,
+            )
+            self.task = self.bar.add_task("", total=total)
+            self.bar.start()
+
+    @staticmethod
+    def line(iteration: int, env_steps: int, s: dict[str, float]) -> str:
+        parts = [f"it {iteration}", f"{env_steps:,} steps", f"{s['steps_per_s']:,.0f} steps/s"]
+        if "episode/return" in s:
+            parts.append(f"return {s['episode/return']:.3g}")
+        if "episode/length" in s:
+            parts.append(f"len {s['episode/length']:.1f}")
+        if "episode/success" in s:
+            parts.append(f"success {s['episode/success']:.2f}")
+        return " | ".join(parts)
+
+    def update(self, iteration: int, env_steps: int, stats: dict[str, float]) -> None:
+        text = self.line(iteration, env_steps, stats)
+        if self.bar is not None:
+            self.bar.update(self.task, completed=iteration, description=text)
+        elif self.console is not None and (iteration % self.every == 0 or iteration == self.total):
+            self.console.print(f"ppo: {text}")
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.stop()
+            self.bar = None
+
+
+__all__ = [
+    "PPOParams",
+    "PPOTrainer",
+    "bounds_loss",
+    "clipped_surrogate",
+    "compute_gae",
+    "explained_variance",
+    "value_loss",
+]

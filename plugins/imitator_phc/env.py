@@ -1,0 +1,590 @@
+"""The PHC imitation environment (a :class:`~mocap.rl.env.VecEnv`) and the observation/action code
+it shares with the trained imitator.
+
+Episode (PHC Sec. 3, digest §3.2-3.6):
+
+* **Reference-state initialization** (RSI, DeepMimic): a clip drawn with the motion library's
+  sampling weights, a start time uniform in the clip (non-looping clips: in
+  ``[0, duration - dt]``, so at least one step remains), and the simulator reset to the reference
+  state there (root pose and velocities, DoF angles and velocities).
+* **Step** ``t -> t+1``: the observation at ``t`` holds the reference at ``t+1``; the action is
+  mapped to PD targets (:class:`ActionMap`), the simulator advances one control step, and the
+  reward (:mod:`mocap_phc.rewards`) and termination (:mod:`mocap_phc.termination`) compare the new
+  state with that same ``t+1`` reference.
+* **End**: *terminated* on tracking failure, fall (optional) or numerical instability (no
+  bootstrap); *truncated* after ``episode_steps`` steps (300 = 10 s at 30 Hz) or when a
+  non-looping clip has no next frame left. Looping clips keep going past their end (the motion
+  library advances the root by the cycle offset each period). Finished envs are reset at once;
+  :attr:`StepResult.final_obs` holds their last observation before the reset.
+* ``episodes`` statistics per finished env: ``return``, ``length`` (steps) and ``success`` (1 if
+  it was truncated, i.e. reached the time limit or the clip's end without terminating).
+
+**Hard-negative mining** (PHC+ "soft" mining; digest pulse §3.3 and phc §4.1), when
+``params.hard_negative``: each clip ``c`` has a failure count ``f_c`` (PHC's
+``termination_history``) and the clip sampling probabilities become::
+
+    p_c = (1 - floor) * f_c / sum(f) + floor * b_c        (p = b while sum(f) = 0)
+
+where ``b`` are the library's initial weights (uniform unless the motion set says otherwise). PHC+
+gives never-failing clips probability 0; the ``floor`` share (default 0.2) keeps every clip in
+play so that mastered clips are not forgotten. ``f`` grows from two sources; before each addition
+``f`` is multiplied by ``hard_negative_decay`` (1 = PHC's never-forgetting counts):
+
+* training episodes: every ``update_every`` finished episodes, each clip played in that window
+  adds its **failure rate** in the window (failures / episodes, in [0, 1]) — a rate, not a raw
+  count, so that a clip's weight does not feed on how often it was sampled;
+* :meth:`ImitationEnv.evaluate_clips` (PHC's evaluation-driven mining): every clip once from
+  frame 0 with deterministic actions in a separate simulator; each failed clip adds 1. The
+  trainer calls it through :meth:`ImitationEnv.after_iteration` every ``eval_every`` iterations.
+  Failure there is the project evaluator's criterion (:func:`mocap.evaluation.rollout_imitation`:
+  mean body error above ``eval_threshold`` = 0.5 m at any frame, or instability).
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Callable, Literal
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from mocap.interfaces import Box, Imitator, Simulator
+from mocap.motion.library import MotionLibrary
+from mocap.observations import imitation_goal, imitation_goal_dim, proprioception, proprioception_dim
+from mocap.rl.env import StepResult
+from mocap.skeleton import Skeleton
+from mocap.state import HumanoidState, MotionFrames, Observations, SimState
+from mocap_phc.rewards import ImitationReward, energy_penalty
+from mocap_phc.termination import Termination
+
+if TYPE_CHECKING:  # pragma: no cover
+    from mocap_phc.imitator import PHCParams
+
+STATE_FORMAT = 1
+PolicyFn = Callable[[Tensor], Tensor]
+
+
+# ------------------------------------------------------------------------------- observations
+@dataclass(frozen=True)
+class PHCObservation:
+    """PHC's policy input: proprioception s^p and the imitation goal s^g (:mod:`mocap.observations`).
+
+    The flat policy observation is ``[s^p | s^g]``; ``extra["ref_dof_pos"]`` carries the next
+    reference's DoF angles for the residual action mapping (not part of the flat vector).
+    """
+
+    goal: Literal["rot", "keypoint"] = "rot"
+    sixd: Literal["zhou", "tan_norm"] = "zhou"
+
+    def dim(self, num_bodies: int) -> int:
+        return proprioception_dim(num_bodies) + imitation_goal_dim(num_bodies, self.goal)
+
+    def __call__(self, state: HumanoidState, ref_next: HumanoidState) -> Observations:
+        proprio = proprioception(state, self.sixd)
+        goal = imitation_goal(state, ref_next, self.goal, self.sixd)
+        return Observations(
+            proprio=torch.nan_to_num(proprio.float(), nan=0.0, posinf=0.0, neginf=0.0),
+            goal=torch.nan_to_num(goal.float(), nan=0.0, posinf=0.0, neginf=0.0),
+            extra={"ref_dof_pos": ref_next.dof_pos},
+        )
+
+    @staticmethod
+    def flatten(obs: Observations) -> Tensor:
+        """(N, P + G) policy input."""
+        assert obs.goal is not None
+        return torch.cat((obs.proprio, obs.goal), dim=-1)
+
+
+# ------------------------------------------------------------------------------------ actions
+def pd_offset_scale(skeleton: Skeleton, overrides: dict[str, float] | None = None) -> tuple[Tensor, Tensor]:
+    """(D,) offset and scale of PHC's absolute action mapping ``q = offset + scale * a``.
+
+    * a joint of 2 or more hinges (PHC's 3-DoF joints): ``scale = min(1.2 max(|lo|, |hi|), pi)``
+      over the joint's hinges, shared by them, ``offset = 0`` (PHC ``_build_pd_action_offset_scale``);
+    * a single hinge (AMP/ASE lineage; PHC's SMPL has none): the range widened to
+      ``mid -+ 0.7 (hi - lo)``, i.e. ``offset = mid``, ``scale = 0.7 (hi - lo)``;
+    * ``overrides``: DoF-name glob -> scale (PHC: the knee's y hinge gets 5 rad, ``*Knee_y``).
+    """
+    offset, scale = [], []
+    for body in skeleton.bodies[1:]:
+        hs = body.joint.hinges
+        if len(hs) == 1:
+            lo, hi = hs[0].range
+            offset.append((lo + hi) / 2.0)
+            scale.append(0.7 * (hi - lo))
+        elif hs:
+            s = min(1.2 * max(max(abs(h.range[0]), abs(h.range[1])) for h in hs), math.pi)
+            offset.extend([0.0] * len(hs))
+            scale.extend([s] * len(hs))
+    for pattern, value in (overrides or {}).items():
+        for i, name in enumerate(skeleton.dof_names):
+            if fnmatch.fnmatchcase(name, pattern):
+                scale[i] = float(value)
+    return torch.tensor(offset, dtype=torch.float64), torch.tensor(scale, dtype=torch.float64)
+
+
+@dataclass(frozen=True)
+class ActionMap:
+    """Policy action (N, D) -> PD targets (N, D), rad.
+
+    * ``"absolute"`` (PHC): ``q = offset + scale * a`` (:func:`pd_offset_scale`);
+    * ``"residual"`` (UHC/RFC-style, FEASIBILITY's faster-learning choice): ``q = q^_{t+1} + a``,
+      the next reference pose plus the action.
+
+    ``clip`` (optional) clamps ``a`` to ``[-clip, clip]`` first.
+    """
+
+    mode: Literal["absolute", "residual"]
+    offset: Tensor
+    scale: Tensor
+    clip: float | None = None
+
+    @classmethod
+    def for_skeleton(
+        cls, skeleton: Skeleton, mode: Literal["absolute", "residual"], clip: float | None = None, overrides: dict[str, float] | None = None
+    ) -> "ActionMap":
+        if mode not in ("absolute", "residual"):
+            raise ValueError(f"unknown action mode {mode!r}; choose 'absolute' or 'residual'")
+        offset, scale = pd_offset_scale(skeleton, overrides)
+        return cls(mode, offset, scale, clip)
+
+    @property
+    def space(self) -> Box:
+        c = math.inf if self.clip is None else float(self.clip)
+        return Box((int(self.offset.numel()),), -c, c)
+
+    def __call__(self, actions: Tensor, ref_dof_pos: Tensor | None) -> Tensor:
+        a = actions if self.clip is None else actions.clamp(-self.clip, self.clip)
+        if self.mode == "absolute":
+            return self.offset.to(a) + self.scale.to(a) * a
+        if ref_dof_pos is None:
+            raise ValueError("residual actions need the next reference's DoF angles")
+        return ref_dof_pos.to(a) + a
+
+
+class PolicyImitator(Imitator):
+    """An :class:`Imitator` from a policy on PHC's flat observation: ``observe`` builds
+    :class:`PHCObservation`, ``act`` runs the policy and maps its action with :class:`ActionMap`.
+
+    ``policy``: an object with ``mean_action(obs)`` and ``act(obs) -> (action, ...)`` (a
+    :class:`mocap.rl.networks.ActorCritic`), or a plain callable ``obs -> action`` (deterministic).
+    """
+
+    def __init__(self, observation: PHCObservation, action_map: ActionMap, policy: Any = None, device: torch.device | str = "cpu"):
+        self.observation = observation
+        self.action_map = action_map
+        self.policy = policy
+        self.device = torch.device(device)
+
+    def observe(self, state: SimState, reference: MotionFrames) -> Observations:
+        return self.observation(state, reference)
+
+    def policy_action(self, flat_obs: Tensor, deterministic: bool = True) -> Tensor:
+        if self.policy is None:
+            raise RuntimeError("this imitator has no trained policy (build it with a checkpoint)")
+        x = flat_obs.to(self.device)
+        with torch.no_grad():
+            if hasattr(self.policy, "mean_action"):
+                if deterministic:
+                    return self.policy.mean_action(x)
+                out = self.policy.act(x)
+                return out[0] if isinstance(out, tuple) else out
+            return self.policy(x)
+
+    def act(self, obs: Observations, deterministic: bool = True) -> Tensor:
+        a = self.policy_action(PHCObservation.flatten(obs), deterministic)
+        ref = obs.extra.get("ref_dof_pos")
+        return self.action_map(a.to(obs.proprio.device), ref)
+
+
+# ---------------------------------------------------------------------------------------- env
+class ImitationEnv:
+    """N imitation episodes on a motion library (module docstring).
+
+    Args:
+        params: :class:`~mocap_phc.imitator.PHCParams`.
+        skeleton: the humanoid.
+        library: the clips (the env owns it: it sets its sampling weights).
+        simulator: N envs of ``skeleton``.
+        seed: seeds the env's RNG (clip and start-time sampling).
+        eval_simulator_factory: ``n -> Simulator`` with n envs, for :meth:`evaluate_clips`.
+    """
+
+    def __init__(
+        self,
+        params: "PHCParams",
+        skeleton: Skeleton,
+        library: MotionLibrary,
+        simulator: Simulator,
+        *,
+        seed: int = 0,
+        eval_simulator_factory: Callable[[int], Simulator] | None = None,
+    ):
+        p = self.params = params
+        self.skeleton = skeleton
+        self.library = lib = library
+        self.sim = simulator
+        self.num_envs = N = int(simulator.num_envs)
+        self.device = lib.device
+        self.dt = float(simulator.dt)
+        self.observation = PHCObservation(p.obs, p.sixd)
+        self.action_map = ActionMap.for_skeleton(skeleton, p.action, p.action_clip, p.action_scale_overrides)
+        self.action_space = self.action_map.space
+        self.obs_dim = self.observation.dim(skeleton.num_bodies)
+        self.reward_fn = ImitationReward(p.reward_form, tuple(p.reward_weights), tuple(p.reward_scales))  # type: ignore[arg-type]
+        self.termination = Termination.for_skeleton(
+            skeleton,
+            p.termination,
+            p.termination_threshold,
+            p.termination_grace,
+            p.termination_exclude,
+            p.fall_check,
+            p.fall_height,
+        )
+        self._eval_factory = eval_simulator_factory
+        self._eval_sims: dict[int, Simulator] = {}
+        self._gen = torch.Generator(device="cpu")
+        self._gen.manual_seed(int(seed))
+
+        C = lib.num_clips
+        dev = self.device
+        self.clip_ids = torch.zeros(N, dtype=torch.long, device=dev)
+        self.start_time = torch.zeros(N, dtype=torch.float64, device=dev)
+        self.progress = torch.zeros(N, dtype=torch.long, device=dev)
+        self.ep_return = torch.zeros(N, dtype=torch.float64, device=dev)
+        self.base_weights = lib.weights.detach().to("cpu", torch.float64).clone()
+        self.fail_counts = torch.zeros(C, dtype=torch.float64)
+        self.episodes_per_clip = torch.zeros(C, dtype=torch.long)
+        self.failures_per_clip = torch.zeros(C, dtype=torch.long)
+        self._win_episodes = torch.zeros(C, dtype=torch.float64)
+        self._win_failures = torch.zeros(C, dtype=torch.float64)
+        self._win_total = 0
+        self._durations = lib.durations.to(dev, torch.float64)
+        self._loops = lib.loops.to(dev)
+        self._ref_next: MotionFrames | None = None
+        self._obs: Tensor | None = None
+        self.last_evaluation: dict[str, Any] | None = None
+
+    # ----------------------------------------------------------------------------- helpers
+    def _ref_at(self, ids: Tensor | None, steps_ahead: int) -> MotionFrames:
+        c = self.clip_ids if ids is None else self.clip_ids[ids]
+        t0 = self.start_time if ids is None else self.start_time[ids]
+        k = self.progress if ids is None else self.progress[ids]
+        return self.library.frames(c, t0 + (k + steps_ahead).to(torch.float64) * self.dt)
+
+    def _observe(self, state: SimState, ids: Tensor | None = None) -> Tensor:
+        """Flat observations of envs ``ids`` (all when None); updates the cached next reference."""
+        ref = self._ref_at(ids, 1)
+        st = state if ids is None else state.index(ids)
+        obs = PHCObservation.flatten(self.observation(st, ref))
+        if ids is None:
+            self._ref_next = ref
+        else:
+            assert self._ref_next is not None
+            _assign_rows(self._ref_next, ids, ref)
+        return obs
+
+    def _reset_envs(self, ids: Tensor) -> None:
+        n = int(ids.numel())
+        if n == 0:
+            return
+        clips, times = self.library.sample(n, generator=self._gen)
+        clips = clips.to(self.device)
+        t0 = times.to(self.device, torch.float64)
+        dur = self._durations[clips]
+        latest = torch.where(self._loops[clips], dur, (dur - self.dt).clamp_min(0.0))
+        t0 = torch.minimum(t0, latest)
+        self.clip_ids[ids] = clips
+        self.start_time[ids] = t0
+        self.progress[ids] = 0
+        self.ep_return[ids] = 0.0
+        self.sim.reset(ids, self.library.frames(clips, t0))
+
+    # ---------------------------------------------------------------------------- VecEnv
+    def reset(self) -> Tensor:
+        """Reset every env (RSI); return the (N, O) observations."""
+        self._reset_envs(torch.arange(self.num_envs, device=self.device))
+        self._obs = self._observe(self.sim.state)
+        return self._obs.clone()
+
+    def step(self, actions: Tensor) -> StepResult:
+        if self._ref_next is None:
+            raise RuntimeError("call reset() (or load_state_dict) before step()")
+        p = self.params
+        N = self.num_envs
+        a = torch.as_tensor(actions, device=self.device).float()
+        if tuple(a.shape) != (N, self.action_space.shape[0]):
+            raise ValueError(f"actions must be ({N}, {self.action_space.shape[0]}), got {tuple(a.shape)}")
+        ref = self._ref_next  # the reference at the time this step reaches
+        targets = self.action_map(a, ref.dof_pos)
+        state = self.sim.step(targets)
+        self.progress += 1
+
+        r_im, terms = self.reward_fn(state, ref)
+        energy = energy_penalty(state.dof_force, state.dof_vel, p.energy_form, p.energy_coef, self.progress)
+        reward = (r_im + energy).double()
+        terminated, parts = self.termination(state, ref, self.progress)
+        reward = torch.where(parts["unstable"] | ~torch.isfinite(reward), torch.zeros_like(reward), reward)
+        t_next = self.start_time + (self.progress + 1).to(torch.float64) * self.dt
+        clip_over = ~self._loops[self.clip_ids] & (t_next > self._durations[self.clip_ids] + 1e-6)
+        truncated = ((self.progress >= p.episode_steps) | clip_over) & ~terminated
+        done = terminated | truncated
+        self.ep_return += reward
+
+        final_obs = self._observe(state)
+        obs = final_obs
+        episodes: dict[str, Tensor] = {}
+        if bool(done.any()):
+            ids = done.nonzero().squeeze(-1)
+            episodes = {
+                "return": self.ep_return[ids].float().cpu(),
+                "length": self.progress[ids].float().cpu(),
+                "success": truncated[ids].float().cpu(),
+            }
+            self._record(self.clip_ids[ids].cpu(), terminated[ids].cpu())
+            self._reset_envs(ids)
+            obs = final_obs.clone()
+            obs[ids] = self._observe(self.sim.state, ids)
+        self._obs = obs
+        err = torch.linalg.vector_norm(state.body_pos - ref.body_pos, dim=-1).mean(-1)
+        info: dict[str, Any] = {
+            "reward/imitation": r_im,
+            **{f"reward/{k}": v for k, v in terms.items()},
+            "reward/energy": energy,
+            "error/body_pos_m": torch.nan_to_num(err, nan=0.0),
+            "terminated/tracking": parts["tracking"].float(),
+            "terminated/fall": parts["fall"].float(),
+            "terminated/unstable": parts["unstable"].float(),
+        }
+        return StepResult(
+            obs=obs.clone(),
+            reward=reward.float(),
+            terminated=terminated.clone(),
+            truncated=truncated.clone(),
+            final_obs=final_obs,
+            info=info,
+            episodes=episodes,
+        )
+
+    def close(self) -> None:
+        for sim in self._eval_sims.values():
+            sim.close()
+        self._eval_sims.clear()
+        self.sim.close()
+
+    # ------------------------------------------------------------------ hard negatives
+    @property
+    def clip_weights(self) -> Tensor:
+        """(C,) current clip sampling probabilities."""
+        return self.library.weights.detach().to("cpu", torch.float64).clone()
+
+    def clip_stats(self) -> dict[str, dict[str, float]]:
+        """Per clip: finished training ``episodes``, ``failures`` (terminations), the mining count
+        ``fail_count`` and the current sampling ``weight``."""
+        w = self.clip_weights
+        return {
+            name: {
+                "episodes": float(self.episodes_per_clip[i]),
+                "failures": float(self.failures_per_clip[i]),
+                "fail_count": float(self.fail_counts[i]),
+                "weight": float(w[i]),
+            }
+            for i, name in enumerate(self.library.clip_names)
+        }
+
+    def _record(self, clip_ids: Tensor, failed: Tensor) -> None:
+        """Count finished training episodes; refresh the weights every ``update_every`` episodes."""
+        ones = torch.ones_like(clip_ids, dtype=torch.float64)
+        f = failed.to(torch.float64)
+        self.episodes_per_clip.index_add_(0, clip_ids, ones.long())
+        self.failures_per_clip.index_add_(0, clip_ids, f.long())
+        self._win_episodes.index_add_(0, clip_ids, ones)
+        self._win_failures.index_add_(0, clip_ids, f)
+        self._win_total += int(clip_ids.numel())
+        if self._win_total >= self.params.update_every:
+            seen = self._win_episodes > 0
+            rate = torch.where(seen, self._win_failures / self._win_episodes.clamp_min(1.0), torch.zeros_like(self._win_failures))
+            self._add_failures(rate)
+            self._win_episodes.zero_()
+            self._win_failures.zero_()
+            self._win_total = 0
+
+    def _add_failures(self, amount: Tensor) -> None:
+        self.fail_counts = self.fail_counts * self.params.hard_negative_decay + amount
+        self._refresh_weights()
+
+    def _refresh_weights(self) -> None:
+        if not self.params.hard_negative:
+            return
+        self.library.set_weights(hard_negative_weights(self.fail_counts, self.base_weights, self.params.hard_negative_floor))
+
+    def evaluate_clips(self, policy_fn: PolicyFn) -> dict[str, Any]:
+        """Every clip once from frame 0 with ``policy_fn`` (flat obs -> action, deterministic) in a
+        separate simulator; failed clips add 1 to their failure count and the weights are refreshed.
+
+        Horizon: the whole clip for non-looping clips, ``episode_steps`` for looping ones.
+        Returns ``success_rate``, ``failed`` (clip names), ``clips`` (name -> ``success``,
+        ``tracked_steps``) and ``weights`` (name -> sampling probability after the update).
+        """
+        from mocap.evaluation import episode_frames, rollout_imitation
+
+        if self._eval_factory is None:
+            raise RuntimeError("evaluate_clips needs an eval_simulator_factory")
+        lib, p = self.library, self.params
+        C = lib.num_clips
+        imitator = PolicyImitator(self.observation, self.action_map, policy_fn)
+        chunk = max(1, min(p.eval_num_envs, C))
+        failed = torch.zeros(C, dtype=torch.bool)
+        tracked = torch.zeros(C, dtype=torch.long)
+        horizon = episode_frames(lib, torch.arange(C, device=lib.device), self.dt, p.episode_steps * self.dt).cpu()
+        for start in range(0, C, chunk):
+            ids = torch.arange(start, min(start + chunk, C))
+            sim = self._eval_sim(len(ids))
+            out = rollout_imitation(sim, lib, imitator, ids.to(lib.device), horizon[ids], threshold=p.eval_threshold)
+            tr = out.traj
+            valid = tr.valid()
+            err = torch.linalg.vector_norm(tr.sim - tr.ref, dim=-1).mean(-1)
+            bad = ((err > p.eval_threshold) & valid).any(0) | out.unstable.cpu()
+            failed[ids] = bad
+            tracked[ids] = (valid.sum(0) - 1).clamp_min(0)
+        self._add_failures(failed.to(torch.float64))
+        names = lib.clip_names
+        w = self.clip_weights
+        result = {
+            "success_rate": float((~failed).double().mean()),
+            "failed": [names[i] for i in range(C) if failed[i]],
+            "clips": {names[i]: {"success": bool(~failed[i]), "tracked_steps": int(tracked[i])} for i in range(C)},
+            "weights": {names[i]: float(w[i]) for i in range(C)},
+        }
+        self.last_evaluation = result
+        return result
+
+    def _eval_sim(self, n: int) -> Simulator:
+        if n not in self._eval_sims:
+            assert self._eval_factory is not None
+            self._eval_sims[n] = self._eval_factory(n)
+        return self._eval_sims[n]
+
+    def after_iteration(self, iteration: int, policy_fn: PolicyFn) -> dict[str, float]:
+        """Trainer hook: every ``eval_every`` iterations run :meth:`evaluate_clips` (which refreshes the
+        sampling weights when ``hard_negative`` is on); returns scalars to log (empty otherwise)."""
+        every = self.params.eval_every
+        if every <= 0 or iteration <= 0 or iteration % every != 0 or self._eval_factory is None:
+            return {}
+        res = self.evaluate_clips(policy_fn)
+        w = self.clip_weights
+        return {
+            "hard_negative/eval_success_rate": res["success_rate"],
+            "hard_negative/failed_clips": float(len(res["failed"])),
+            "hard_negative/max_weight": float(w.max()),
+            "hard_negative/min_weight": float(w.min()),
+        }
+
+    # -------------------------------------------------------------------------- resume
+    def state_dict(self) -> dict[str, Any]:
+        """RNG, episode counters, sampling weights, hard-negative counts and the simulator's physics state."""
+        if self._ref_next is None:
+            raise RuntimeError("state_dict() before reset()")
+        sd: dict[str, Any] = {
+            "format": STATE_FORMAT,
+            "num_envs": self.num_envs,
+            "clip_names": list(self.library.clip_names),
+            "generator": self._gen.get_state().clone(),
+            "clip_ids": self.clip_ids.cpu().clone(),
+            "start_time": self.start_time.cpu().clone(),
+            "progress": self.progress.cpu().clone(),
+            "ep_return": self.ep_return.cpu().clone(),
+            "fail_counts": self.fail_counts.clone(),
+            "episodes_per_clip": self.episodes_per_clip.clone(),
+            "failures_per_clip": self.failures_per_clip.clone(),
+            "win_episodes": self._win_episodes.clone(),
+            "win_failures": self._win_failures.clone(),
+            "win_total": self._win_total,
+            "weights": self.clip_weights,
+        }
+        if hasattr(self.sim, "get_physics_state"):
+            sd["physics"] = torch.from_numpy(np.array(self.sim.get_physics_state(), dtype=np.float64, copy=True))
+        else:  # any Simulator: the kinematic state it can be reset to
+            s = self.sim.state
+            sd["sim_state"] = {k: getattr(s, k).cpu().clone() for k in _HUMANOID_FIELDS}
+        return sd
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        if state.get("format") != STATE_FORMAT:
+            raise ValueError(f"not an ImitationEnv state (format {state.get('format')!r})")
+        if int(state["num_envs"]) != self.num_envs:
+            raise ValueError(f"state has {state['num_envs']} envs, this env {self.num_envs}")
+        if list(state["clip_names"]) != list(self.library.clip_names):
+            raise ValueError("the saved env state was made with a different motion set")
+        dev = self.device
+        self._gen.set_state(state["generator"].clone())
+        self.clip_ids = state["clip_ids"].to(dev).clone()
+        self.start_time = state["start_time"].to(dev).clone()
+        self.progress = state["progress"].to(dev).clone()
+        self.ep_return = state["ep_return"].to(dev).clone()
+        self.fail_counts = state["fail_counts"].clone()
+        self.episodes_per_clip = state["episodes_per_clip"].clone()
+        self.failures_per_clip = state["failures_per_clip"].clone()
+        self._win_episodes = state["win_episodes"].clone()
+        self._win_failures = state["win_failures"].clone()
+        self._win_total = int(state["win_total"])
+        self.library.set_weights(state["weights"])
+        ids = torch.arange(self.num_envs)
+        if "physics" in state and hasattr(self.sim, "set_physics_state"):
+            phys = state["physics"]
+            phys = phys.detach().cpu().numpy() if isinstance(phys, Tensor) else np.asarray(phys)
+            self.sim.set_physics_state(ids, np.array(phys, dtype=np.float64, copy=True))
+        elif "sim_state" in state:
+            self.sim.reset(ids, HumanoidState(**{k: v.to(dev) for k, v in state["sim_state"].items()}))
+        else:
+            raise ValueError("the saved env state has no simulator state usable by this simulator")
+        self._obs = self._observe(self.sim.state)
+
+    def current_obs(self) -> Tensor:
+        """(N, O) the observation the next :meth:`step` acts on."""
+        if self._obs is None:
+            raise RuntimeError("call reset() first")
+        return self._obs.clone()
+
+
+_HUMANOID_FIELDS = (
+    "root_pos",
+    "root_rot",
+    "root_lin_vel",
+    "root_ang_vel",
+    "dof_pos",
+    "dof_vel",
+    "body_pos",
+    "body_rot",
+    "body_lin_vel",
+    "body_ang_vel",
+)
+
+
+def _assign_rows(dst: HumanoidState, ids: Tensor, src: HumanoidState) -> None:
+    """``dst[ids] = src`` for every tensor field with rows."""
+    for name in (*_HUMANOID_FIELDS, "clip_ids", "times"):
+        d, s = getattr(dst, name, None), getattr(src, name, None)
+        if isinstance(d, Tensor) and isinstance(s, Tensor) and d.dim() > 0 and d.numel():
+            d[ids] = s.to(d)
+
+
+def hard_negative_weights(fail_counts: Tensor, base: Tensor, floor: float) -> Tensor:
+    """Clip sampling probabilities ``(1 - floor) f / sum(f) + floor b`` (``b`` when ``sum(f) = 0``).
+
+    Every clip with ``b_c > 0`` keeps at least ``floor * b_c`` (for ``floor > 0``); the result sums to 1.
+    """
+    f = fail_counts.to(torch.float64).clamp_min(0.0)
+    b = base.to(torch.float64)
+    b = b / b.sum()
+    total = f.sum()
+    if float(total) <= 0.0:
+        return b.clone()
+    w = (1.0 - floor) * f / total + floor * b
+    return w / w.sum()
+
+
+__all__ = ["ActionMap", "ImitationEnv", "PHCObservation", "PolicyImitator", "hard_negative_weights", "pd_offset_scale"]

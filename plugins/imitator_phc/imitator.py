@@ -1,0 +1,176 @@
+"""The ``phc`` imitator: parameters (every paper-vs-code switch), the factory and the trained imitator.
+
+Defaults follow the paper wherever PHC (ICCV 2023) states a value, and the official code where
+the paper is silent (DESIGN.md "paper fidelity"); each field's description says which is which.
+For small CPU runs, FEASIBILITY.md's learning measurements favour ``action: residual``; the code's
+reward form (``reward_form: code``) is the one PHC was actually trained with. One exception to
+"paper by default": ``energy_form`` defaults to the code's |tau q-dot| (see its description).
+
+Energy scale, measured on ``amp`` (walk and kick, RSI, residual actions, c = 5e-4, code form): about
+-0.2 per step with zero actions and -2.6 per step under sigma = 0.3 exploration noise, against an
+imitation reward of at most 1. A return that is mostly negative teaches the policy to end episodes
+early, so short CPU runs should lower ``energy_coef`` (the code's composer value 5e-5) or set it to 0.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Literal
+
+import torch
+from pydantic import BaseModel, ConfigDict, Field
+
+from mocap.skeleton import Skeleton
+from mocap_phc.env import ActionMap, ImitationEnv, PHCObservation, PolicyImitator
+from mocap_phc.rewards import DEFAULT_SCALES, DEFAULT_WEIGHTS
+
+
+class PHCParams(BaseModel):
+    """Parameters of the PHC / PHC+ imitator ([P] paper value, [C] official code value)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    # ------------------------------------------------------------------------- observation
+    obs: Literal["rot", "keypoint"] = Field(
+        "rot",
+        description="imitation goal: 'rot' = rotation + keypoint goal (24 per body, [P]/[C] obs_v 6) or "
+        "'keypoint' = keypoints only (9 per body, [P] keypoint model, [C] obs_v 7)",
+    )
+    sixd: Literal["zhou", "tan_norm"] = Field(
+        "zhou",
+        description="6-D rotation features: 'zhou' = first two matrix columns ([P], Zhou et al.) or "
+        "'tan_norm' = rotated x and z axes ([C])",
+    )
+    # ------------------------------------------------------------------------------ reward
+    reward_form: Literal["paper", "code"] = Field(
+        "paper",
+        description="imitation reward errors: 'paper' = norms exp(-k ||x^ - x||) (mean over bodies of the "
+        "per-body norm / rotation angle) or 'code' = mean squared components exp(-k mean (x^ - x)^2)",
+    )
+    reward_weights: tuple[float, float, float, float] = Field(
+        DEFAULT_WEIGHTS, description="(w_pos, w_rot, w_vel, w_ang_vel); [C] and PULSE Table 4: 0.5, 0.3, 0.1, 0.1 (not in the PHC paper)"
+    )
+    reward_scales: tuple[float, float, float, float] = Field(
+        DEFAULT_SCALES, description="(k_pos, k_rot, k_vel, k_ang_vel) in exp(-k e); [P]/[C]: 100, 10, 0.1, 0.1"
+    )
+    energy_form: Literal["paper", "code"] = Field(
+        "code",
+        description="energy penalty: 'paper' = -c sum (tau q-dot)^2 as printed, or 'code' = -c sum |tau q-dot| (power, as in "
+        "Fu et al. whom the paper cites), zero for the first 3 steps of an episode. Default 'code': the printed square "
+        "gives about -10^3 per step on amp right after RSI (measured), drowning the imitation reward (<= 1)",
+    )
+    energy_coef: float = Field(
+        0.0005, ge=0.0, description="energy coefficient c; [P]/[C] primitives 0.0005 ([C] composer/get-up 0.00005); 0 disables"
+    )
+    # ------------------------------------------------------------------------- termination
+    termination: Literal["paper", "code"] = Field(
+        "paper",
+        description="early termination: 'paper' = mean distance of the checked bodies > threshold (RET, 0.5 m) or "
+        "'code' = any checked body > threshold (0.25 m) after the first step",
+    )
+    termination_threshold: float | None = Field(None, gt=0.0, description="m; None: 0.5 for 'paper', 0.25 for 'code'")
+    termination_grace: int | None = Field(
+        None, ge=0, description="steps after a reset that are never checked; None: 0 for 'paper', 1 for 'code' ([C] progress_buf > 1)"
+    )
+    termination_exclude: list[str] | None = Field(
+        None, description="bodies not checked (RET: ankles and toes); None: the skeleton's feet (smpl: ankles + toes; amp: feet)"
+    )
+    fall_check: bool = Field(
+        False, description="also terminate when a non-foot body touches the ground (not PHC imitation; FEASIBILITY's env used it)"
+    )
+    fall_height: float | None = Field(None, gt=0.0, description="with fall_check: only count contacts of bodies below this height, m (ASE: 0.15)")
+    # ------------------------------------------------------------------------------ action
+    action: Literal["absolute", "residual"] = Field(
+        "absolute",
+        description="'absolute' = PD target offset + scale * a ([P]/[C]: PHC removed residual actions) or "
+        "'residual' = next reference pose + a (UHC-style; FEASIBILITY: cheaper early learning on CPU)",
+    )
+    action_clip: float | None = Field(
+        None, gt=0.0, description="clamp actions to [-clip, clip] (the env's Box bounds); None: unbounded (FEASIBILITY's residual run: 3)"
+    )
+    action_scale_overrides: dict[str, float] = Field(
+        default_factory=lambda: {"*Knee_y": 5.0},
+        description="absolute mode: DoF-name glob -> action scale, rad ([C] 'stronger knee': knee y = 5)",
+    )
+    # ---------------------------------------------------------------------------- episodes
+    episode_steps: int = Field(300, ge=1, description="time limit in control steps ([C] 300 = 10 s at 30 Hz); truncation, bootstrapped")
+    # ----------------------------------------------------------------------- hard negatives
+    hard_negative: bool = Field(
+        True, description="PHC+ soft hard-negative mining: clip sampling weights follow per-clip failure counts ([C] auto_pmcp_soft)"
+    )
+    hard_negative_floor: float = Field(
+        0.2, ge=0.0, le=1.0, description="share of sampling mass kept on the base weights so that no clip goes to 0 (PHC+: 0)"
+    )
+    hard_negative_decay: float = Field(1.0, gt=0.0, le=1.0, description="failure counts are multiplied by this before each update (PHC: 1)")
+    update_every: int = Field(256, ge=1, description="finished training episodes between weight updates from their failure rates")
+    eval_every: int = Field(
+        100, ge=0, description="trainer iterations between evaluate_clips runs (every clip from frame 0, deterministic); 0 disables"
+    )
+    eval_num_envs: int = Field(64, ge=1, description="clips evaluated in parallel by evaluate_clips")
+    eval_threshold: float = Field(0.5, gt=0.0, description="evaluate_clips failure: mean body error above this, m ([P]/[C] evaluation 0.5)")
+
+    def observation(self) -> PHCObservation:
+        return PHCObservation(self.obs, self.sixd)
+
+    def action_map(self, skeleton: Skeleton) -> ActionMap:
+        return ActionMap.for_skeleton(skeleton, self.action, self.action_clip, self.action_scale_overrides)
+
+
+class PHCImitator(PolicyImitator):
+    """PHC / PHC+ imitator: ``observe`` builds [s^p | s^g] (:class:`~mocap_phc.env.PHCObservation`)
+    and ``act`` maps the trained policy's action to PD targets (:class:`~mocap_phc.env.ActionMap`),
+    exactly as :class:`~mocap_phc.env.ImitationEnv` does during training.
+
+    ``observe(state, ref)`` expects ``ref`` at the *next* control time (t + 1), as the evaluator's
+    ``rollout_imitation`` passes it.
+    """
+
+    def __init__(self, params: PHCParams, skeleton: Skeleton, policy: Any = None, device: torch.device | str = "cpu"):
+        super().__init__(params.observation(), params.action_map(skeleton), policy, device)
+        self.params = params
+        self.skeleton = skeleton
+        self.obs_dim = self.observation.dim(skeleton.num_bodies)
+
+    def make_env(self, ctx: Any, num_envs: int) -> ImitationEnv:
+        """The training env: the spec's motions and simulator, seeded by the stage seed."""
+        from mocap.motion.library import MotionLibrary
+
+        skeleton = self.skeleton
+        motion_set = ctx.build("motions").load(skeleton)
+        for path, reason in getattr(motion_set, "skipped", []):
+            ctx.console.print(f"[yellow]skipped[/] {path}: {reason}")
+        library = MotionLibrary(motion_set, skeleton)
+        sim = ctx.build("simulator", skeleton=skeleton, num_envs=num_envs, seed=ctx.seed)
+
+        def eval_sim(n: int) -> Any:
+            return ctx.build("simulator", skeleton=skeleton, num_envs=n, seed=ctx.seed)
+
+        return ImitationEnv(self.params, skeleton, library, sim, seed=ctx.seed, eval_simulator_factory=eval_sim)
+
+
+def make_phc(
+    params: PHCParams | None = None,
+    *,
+    skeleton: Skeleton,
+    checkpoint: str | Path | None = None,
+    device: torch.device | str = "cpu",
+) -> PHCImitator:
+    """Registry factory: an untrained imitator (for ``make_env``) or, with ``checkpoint`` (a policy
+    file of :func:`mocap.rl.networks.save_policy`), the trained one."""
+    params = params or PHCParams()
+    policy = None
+    if checkpoint is not None:
+        from mocap.rl.networks import load_policy
+
+        policy = load_policy(Path(checkpoint), map_location=device)
+        want = params.observation().dim(skeleton.num_bodies)
+        got = getattr(policy, "obs_dim", want)
+        if got != want:
+            raise ValueError(
+                f"{checkpoint}: the policy takes {got} observation dims, but phc with obs={params.obs!r} on "
+                f"{skeleton.name!r} ({skeleton.num_bodies} bodies) produces {want}"
+            )
+    return PHCImitator(params, skeleton, policy, device)
+
+
+__all__ = ["PHCImitator", "PHCParams", "make_phc"]

@@ -1,0 +1,19 @@
+"""Entry point of the ``phc`` imitator plugin (group ``mocap``: ``imitator_phc = "mocap_phc.plugin"``)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from mocap.hooks import hookimpl
+from mocap_phc.imitator import PHCParams, make_phc
+
+
+@hookimpl
+def register_imitators(register: Any) -> None:
+    register(
+        "phc",
+        make_phc,
+        params=PHCParams,
+        description="PHC/PHC+ imitator: proprioception + next-frame imitation goal -> PD targets; "
+        "RSI, relaxed early termination, hard-negative clip sampling (paper/code switches)",
+    )
