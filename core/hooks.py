@@ -58,12 +58,12 @@ def register_imitators(register: Register) -> None:
 
 @hookspec
 def register_latent_spaces(register: Register) -> None:
-    """Register latent spaces: ``factory(params, *, env) -> LatentSpace``."""
+    """Register latent spaces: ``factory(params, *, skeleton, checkpoint, device) -> LatentSpace``."""
 
 
 @hookspec
 def register_tasks(register: Register) -> None:
-    """Register downstream tasks: ``factory(params, *, env) -> Task``."""
+    """Register downstream tasks: ``factory(params, *, skeleton, checkpoint, device) -> Task``."""
 
 
 @hookspec

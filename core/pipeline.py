@@ -152,6 +152,21 @@ class StageContext:
     def skeleton(self) -> Skeleton:
         return self.build("humanoid")
 
+    def stage_component(self, stage: str | None = None, checkpoint: Path | None = None) -> Any:
+        """Build a stage's component (imitator, latent space or task; default: this stage's).
+
+        Stage components share one factory signature: ``factory(params, *, skeleton, checkpoint,
+        device)``; ``checkpoint`` is None when the component is about to be trained.
+        """
+        return self.build(stage or self.stage, skeleton=self.skeleton, checkpoint=checkpoint, device=self.device)
+
+    def make_rl_env(self, num_envs: int) -> Any:
+        """The RL problem of this stage: ``stage_component().make_env(self, num_envs)`` (a VecEnv)."""
+        component = self.stage_component()
+        if not hasattr(component, "make_env"):
+            raise StageFailed(f"{self.stage} {getattr(self.spec, self.stage).name!r} cannot be trained by RL (no make_env)")
+        return component.make_env(self, num_envs)
+
     def spec_yaml(self) -> str:
         return self.resolved.to_yaml()
 

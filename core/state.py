@@ -68,11 +68,14 @@ class SimState(HumanoidState):
         body_contact: (N, B) bool, body touches the ground (or a prop) this control step.
         unstable: (N,) bool, the env went numerically unstable during the last step (NaN or
             huge accelerations); the simulator resets such envs and counts them.
+        dof_force: (N, D) actuator torque applied at each hinge during the last physics
+            substep, N m (for energy penalties).
     """
 
     contact_forces: Tensor = field(default_factory=lambda: torch.zeros(0))
     body_contact: Tensor = field(default_factory=lambda: torch.zeros(0, dtype=torch.bool))
     unstable: Tensor = field(default_factory=lambda: torch.zeros(0, dtype=torch.bool))
+    dof_force: Tensor = field(default_factory=lambda: torch.zeros(0))
 
 
 @dataclass
