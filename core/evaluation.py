@@ -16,9 +16,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Callable, Optional
 
 import torch
+import typer
 from pydantic import BaseModel, ConfigDict, Field
 from rich.progress import Progress
 
@@ -95,7 +96,7 @@ def rollout_imitation(
         err = torch.linalg.vector_norm(sp - rp, dim=-1).mean(-1)
         alive = alive & (err <= threshold) & ~unstable
         if recorder is not None:
-            recorder.add_frame(state, 0, ghost=ref)
+            recorder.add_frame(state, ghost=ref)
         if progress is not None:
             progress()
         if not bool((alive & (k < frames)).any()):
@@ -112,6 +113,95 @@ def episode_frames(lib: MotionLibrary, clip_ids: torch.Tensor, dt: float, horizo
     return torch.floor(dur / dt + 1e-6).long().clamp_min(1)
 
 
+def evaluate_imitator(
+    imitator: Imitator,
+    lib: MotionLibrary,
+    make_sim: Callable[[int], Simulator],
+    params: ImitationEvalParams,
+    metrics: list[Metric] | None = None,
+    console: Any = None,
+) -> dict[str, Any]:
+    """Run the evaluation protocol (module docstring) and return the result table.
+
+    The table: ``protocol``, ``fps``, ``units``, ``aggregate`` (``success_rate`` in [0, 1],
+    ``succeeded``, ``total``, every metric's mean over all clips, and ``<metric>_succ`` its mean
+    over the successful clips only — PHC reports MPJPE that way) and ``clips`` (clip name -> the
+    metrics of that clip with ``success`` true/false and ``tracked_s``).
+    """
+    metrics = metrics if metrics is not None else default_metrics()
+    p = params
+    all_ids = torch.arange(lib.num_clips)
+    per_episode: dict[str, list[torch.Tensor]] = {m.name: [] for m in metrics}
+    lengths: list[torch.Tensor] = []
+    instab: list[torch.Tensor] = []
+    dt = 1.0 / 30.0
+    with Progress(transient=True, console=console, disable=console is None) as bar:
+        task = bar.add_task("imitation eval", total=lib.num_clips)
+        for start in range(0, lib.num_clips, p.num_envs):
+            ids = all_ids[start : start + p.num_envs]
+            sim = make_sim(len(ids))
+            dt = sim.dt
+            frames = episode_frames(lib, ids, dt, p.horizon)
+            out = rollout_imitation(sim, lib, imitator, ids, frames, threshold=p.threshold)
+            sim.close()
+            for m in metrics:
+                per_episode[m.name].append(m(out.traj).double())
+            lengths.append((out.traj.mask.sum(0).double() - 1).clamp_min(0) * dt)
+            instab.append(out.unstable)
+            bar.advance(task, len(ids))
+    values = {k: torch.cat(v) for k, v in per_episode.items()}
+    seconds = torch.cat(lengths)
+    unstable = torch.cat(instab)
+    ok = values["success"] > 0.5 if "success" in values else torch.ones(lib.num_clips, dtype=torch.bool)
+    clips: dict[str, dict[str, Any]] = {}
+    for c in range(lib.num_clips):
+        row: dict[str, Any] = {k: _num(v[c]) for k, v in values.items() if k != "success"}
+        row["success"] = bool(ok[c])
+        row["tracked_s"] = round(float(seconds[c]), 3)
+        row["unstable"] = bool(unstable[c])
+        clips[lib.clip_names[c]] = row
+    aggregate: dict[str, Any] = {
+        "success_rate": float(ok.double().mean()),
+        "succeeded": int(ok.sum()),
+        "total": lib.num_clips,
+        "fps": 1.0 / dt,
+        "tracked_s": _num(seconds.mean()),
+        "unstable_episodes": int(unstable.sum()),
+    }
+    for k, v in values.items():
+        if k == "success":
+            continue
+        aggregate[k] = _num(_nanmean(v))
+        aggregate[f"{k}_succ"] = _num(_nanmean(v[ok])) if bool(ok.any()) else float("nan")
+    return {
+        "protocol": PROTOCOL,
+        "fps": 1.0 / dt,
+        "horizon": "clip length" if p.horizon is None else f"looping clips: {p.horizon:g} s",
+        "units": _units(metrics),
+        "aggregate": aggregate,
+        "clips": clips,
+    }
+
+
+def record_video(
+    imitator: Imitator, lib: MotionLibrary, make_sim: Callable[[int], Simulator], clip: str, seconds: float, path: Path
+) -> Path | None:
+    """Roll the imitator out on ``clip`` and save a video with the reference drawn as a ghost.
+
+    Returns None when the simulator cannot render (it has no ``make_recorder``).
+    """
+    sim = make_sim(1)
+    recorder = sim.make_recorder(ghost=True) if hasattr(sim, "make_recorder") else None
+    if recorder is None:
+        sim.close()
+        return None
+    frames = torch.tensor([max(1, int(seconds / sim.dt))])
+    rollout_imitation(sim, lib, imitator, torch.tensor([lib.clip_index(clip)]), frames, threshold=math.inf, recorder=recorder)
+    recorder.save(path)
+    sim.close()
+    return path
+
+
 class ImitationEval(Trainer):
     """Evaluates the spec's imitator on every clip: success, MPJPE-G/L/PA, velocity and acceleration errors."""
 
@@ -126,72 +216,31 @@ class ImitationEval(Trainer):
             ctx.console.print(f"[yellow]skipped[/] {path}: {reason}")
         lib = MotionLibrary(motion_set, skeleton)
         upstream = ctx.upstream.get("imitator")
-        imitator = ctx.build("imitator", skeleton=skeleton, checkpoint=upstream.checkpoint if upstream else None, device=ctx.device)
-        metrics = self._metrics(ctx)
-        all_ids = torch.arange(lib.num_clips)
-        per_episode: dict[str, list[torch.Tensor]] = {m.name: [] for m in metrics}
-        lengths: list[torch.Tensor] = []
-        instab: list[torch.Tensor] = []
-        dt = None
-        with Progress(transient=True, console=ctx.console) as bar:
-            task = bar.add_task("imitation eval", total=lib.num_clips)
-            for start in range(0, lib.num_clips, p.num_envs):
-                ids = all_ids[start : start + p.num_envs]
-                sim = ctx.build("simulator", skeleton=skeleton, num_envs=len(ids), seed=ctx.seed)
-                dt = sim.dt
-                frames = episode_frames(lib, ids, dt, p.horizon)
-                out = rollout_imitation(sim, lib, imitator, ids, frames, threshold=p.threshold)
-                sim.close()
-                for m in metrics:
-                    per_episode[m.name].append(m(out.traj).double())
-                lengths.append(out.traj.mask.sum(0).double() * dt)
-                instab.append(out.unstable)
-                bar.advance(task, len(ids))
-        values = {k: torch.cat(v) for k, v in per_episode.items()}
-        seconds = torch.cat(lengths)
-        unstable = torch.cat(instab)
-        rows = []
-        for c in range(lib.num_clips):
-            row: dict[str, Any] = {"clip": lib.clip_names[c], "tracked_s": round(float(seconds[c]), 3)}
-            row.update({k: _num(v[c]) for k, v in values.items()})
-            rows.append(row)
-        overall = {k: _num(_nanmean(v)) for k, v in values.items()}
-        overall["tracked_s"] = _num(seconds.mean())
-        overall["unstable_episodes"] = float(unstable.sum())
-        table = {"protocol": PROTOCOL, "fps": 1.0 / dt if dt else None, "units": _units(metrics), "clips": rows, "overall": overall}
+        imitator = ctx.stage_component("imitator", checkpoint=upstream.checkpoint if upstream else None)
+
+        def make_sim(n: int) -> Simulator:
+            return ctx.build("simulator", skeleton=skeleton, num_envs=n, seed=ctx.seed)
+
+        table = evaluate_imitator(imitator, lib, make_sim, p, self._metrics(ctx), ctx.console)
         atomic_write_json(ctx.workdir / "imitation_eval.json", table)
         atomic_write_json(Path(ctx.run_dir) / "imitation_eval.json", table)
         atomic_write_text(Path(ctx.run_dir) / "imitation_eval.md", render_table(table))
-        for k, v in overall.items():
-            ctx.log.log(0, **{k: v})
+        numeric = {k: float(v) for k, v in table["aggregate"].items() if isinstance(v, (int, float))}
+        ctx.log.log(0, **numeric)
         if p.video:
-            self._video(ctx, lib, imitator)
-        return StageResult(checkpoint=None, metrics=overall)
+            clip = p.video_clip or lib.clip_names[0]
+            path = record_video(imitator, lib, make_sim, clip, p.video_seconds, Path(ctx.run_dir) / f"imitation_{clip}.{p.video_format}")
+            ctx.console.print(f"video: {path}" if path else "[yellow]video skipped[/]: the simulator cannot render")
+        return StageResult(checkpoint=None, metrics=numeric)
 
     def _metrics(self, ctx) -> list[Metric]:  # type: ignore[no-untyped-def]
         metrics = default_metrics()
-        for i, ref in enumerate(ctx.spec.eval.metrics if ctx.spec.eval else []):
+        for i, _ in enumerate(ctx.spec.eval.metrics if ctx.spec.eval else []):
             metrics.append(ctx.build(f"eval.metrics.{i}"))
         seen: dict[str, Metric] = {}
         for m in metrics:
             seen[m.name] = m  # a spec's metric of the same name replaces the default
         return list(seen.values())
-
-    def _video(self, ctx, lib: MotionLibrary, imitator: Imitator) -> None:  # type: ignore[no-untyped-def]
-        p = self.params
-        name = p.video_clip or lib.clip_names[0]
-        clip = lib.clip_index(name)
-        sim = ctx.build("simulator", skeleton=ctx.skeleton, num_envs=1, seed=ctx.seed)
-        recorder = sim.make_recorder() if hasattr(sim, "make_recorder") else None
-        if recorder is None:
-            ctx.console.print("[yellow]video skipped[/]: the simulator cannot render")
-            return
-        frames = torch.tensor([max(1, int(p.video_seconds / sim.dt))])
-        rollout_imitation(sim, lib, imitator, torch.tensor([clip]), frames, threshold=math.inf, recorder=recorder)
-        path = Path(ctx.run_dir) / f"imitation_{name}.{p.video_format}"
-        recorder.save(path)
-        sim.close()
-        ctx.console.print(f"video: {path}")
 
 
 def _nanmean(v: torch.Tensor) -> torch.Tensor:
@@ -209,20 +258,26 @@ def _units(metrics: list[Metric]) -> dict[str, str]:
 
 
 def render_table(table: dict[str, Any]) -> str:
+    """The result table as Markdown: one row per clip, then the aggregate (all clips / successful)."""
     units = table["units"]
-    cols = ["tracked_s", *units]
-    head = "| clip | " + " | ".join(f"{c} ({units[c]})" if c in units else f"{c}" for c in cols) + " |"
+    cols = [c for c in units if c != "success"]
+    head = "| clip | success | tracked (s) | " + " | ".join(f"{c} ({units[c]})" for c in cols) + " |"
+    agg = table["aggregate"]
     lines = [
         "# Imitation evaluation",
         "",
-        f"Protocol: {table['protocol']}; fps {table['fps']:.0f}." if table.get("fps") else f"Protocol: {table['protocol']}.",
+        f"Protocol: {table['protocol']}; fps {table['fps']:.0f}; horizon: {table['horizon']}.",
+        "",
+        f"**Success: {agg['succeeded']} / {agg['total']} clips ({100 * agg['success_rate']:.1f}%)**",
         "",
         head,
-        "|" + "---|" * (len(cols) + 1),
+        "|" + "---|" * (len(cols) + 3),
     ]
-    for row in table["clips"]:
-        lines.append(f"| {row['clip']} | " + " | ".join(_cell(row.get(c)) for c in cols) + " |")
-    lines.append("| **all** | " + " | ".join(_cell(table["overall"].get(c)) for c in cols) + " |")
+    for name, row in table["clips"].items():
+        mark = "yes" if row["success"] else "no"
+        lines.append(f"| {name} | {mark} | {_cell(row['tracked_s'])} | " + " | ".join(_cell(row.get(c)) for c in cols) + " |")
+    lines.append(f"| **all clips** | {agg['succeeded']}/{agg['total']} | {_cell(agg['tracked_s'])} | " + " | ".join(_cell(agg.get(c)) for c in cols) + " |")
+    lines.append("| **successful clips** | | | " + " | ".join(_cell(agg.get(f"{c}_succ")) for c in cols) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -247,6 +302,124 @@ def register_trainers(register):  # type: ignore[no-untyped-def]
 @hookimpl
 def register_imitators(register):  # type: ignore[no-untyped-def]
     register("pd_replay", _make_pd_replay, params=NoParams, description="baseline: PD targets = the next reference pose")
+
+
+def load_evaluation_target(target: Path, plugins: Any) -> tuple[Any, Path | None]:
+    """(resolved spec, imitator checkpoint) from a policy checkpoint or a run directory.
+
+    A checkpoint carries the spec that trained it; a run directory has ``spec.yaml`` and
+    ``stages.json`` (the imitator stage's checkpoint, None for untrained baselines).
+    """
+    import json
+
+    import yaml
+
+    from mocap.checkpoint import load_checkpoint
+    from mocap.cli import UserError
+    from mocap.spec import validate_document
+
+    target = Path(target)
+    if target.is_dir():
+        spec_file, stages_file = target / "spec.yaml", target / "stages.json"
+        if not spec_file.is_file():
+            raise UserError(f"{target}: not a run directory (no spec.yaml)")
+        resolved = validate_document(yaml.safe_load(spec_file.read_text()), plugins, source=str(spec_file))
+        checkpoint = None
+        if stages_file.is_file():
+            for stage in json.loads(stages_file.read_text()):
+                if stage["stage"] == "imitator" and stage.get("checkpoint"):
+                    checkpoint = Path(stage["checkpoint"])
+        if resolved.spec.imitator is None:
+            raise UserError(f"{spec_file}: the run has no imitator stage to evaluate")
+        if checkpoint is None and resolved.spec.imitator.trainer is not None:
+            raise UserError(f"{target}: the imitator stage has not finished (no checkpoint in stages.json); run it first")
+        return resolved, checkpoint
+    if not target.is_file():
+        raise UserError(f"{target}: no such checkpoint file or run directory")
+    try:
+        data = load_checkpoint(target)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    spec_yaml = data.get("spec") if isinstance(data, dict) else None
+    if not spec_yaml:
+        raise UserError(f"{target}: the checkpoint carries no spec; evaluate its run directory instead")
+    resolved = validate_document(yaml.safe_load(spec_yaml), plugins, source=f"{target} (embedded spec)")
+    if resolved.spec.imitator is None:
+        raise UserError(f"{target}: its spec has no imitator")
+    return resolved, target
+
+
+@hookimpl
+def register_commands(app):  # type: ignore[no-untyped-def]
+    @app.command("eval")
+    def eval_command(
+        target: Annotated[Path, typer.Argument(help="an imitator checkpoint (policy.pt) or a run directory")],
+        motions: Annotated[
+            Optional[str], typer.Option("--motions", help="evaluate on this motion source instead of the training one (default params)")
+        ] = None,
+        json_out: Annotated[Optional[Path], typer.Option("--json", help="write the result table as JSON")] = None,
+        video: Annotated[Optional[Path], typer.Option("--video", help="write one video per clip (reference as a ghost) here")] = None,
+        loop: Annotated[
+            Optional[float], typer.Option("--loop", help="robustness protocol: looping clips keep cycling for this many seconds")
+        ] = None,
+        num_envs: Annotated[int, typer.Option(help="clips simulated in parallel")] = 64,
+    ) -> None:
+        """Evaluate an imitator with the imitation protocol (each clip from its first frame, deterministic)."""
+        import json
+
+        from rich.console import Console
+        from rich.table import Table
+
+        from mocap.plugins import get_plugins
+
+        console = Console(stderr=True)
+        plugins = get_plugins()
+        resolved, checkpoint = load_evaluation_target(target, plugins)
+        spec = resolved.spec
+        skeleton = plugins.get("humanoid", spec.humanoid.name).build(resolved.params.get("humanoid"))
+        if motions is None:
+            source = plugins.get("motion_source", spec.motions.name).build(resolved.params.get("motions"))
+        else:
+            source = plugins.get("motion_source", motions).build({})
+        motion_set = source.load(skeleton)
+        lib = MotionLibrary(motion_set, skeleton)
+        imitator = plugins.get("imitator", spec.imitator.name).build(
+            resolved.params.get("imitator"), skeleton=skeleton, checkpoint=checkpoint, device="cpu"
+        )
+        sim_component = plugins.get("simulator", spec.simulator.name)
+        sim_params = resolved.params.get("simulator")
+
+        def make_sim(n: int) -> Simulator:
+            return sim_component.build(sim_params, skeleton=skeleton, num_envs=n, seed=spec.seed)
+
+        params = ImitationEvalParams(num_envs=num_envs, horizon=loop, video=False)
+        table = evaluate_imitator(imitator, lib, make_sim, params, default_metrics(), console)
+        table["checkpoint"] = str(checkpoint) if checkpoint else None
+        units = table["units"]
+        cols = [c for c in units if c != "success"]
+        out = Table(title=f"{spec.imitator.name} on {len(lib.clip_names)} clips ({table['horizon']})")
+        for col in ["clip", "success", "tracked s", *[f"{c} ({units[c]})" for c in cols]]:
+            out.add_column(col, justify="left" if col == "clip" else "right")
+        for name, row in table["clips"].items():
+            out.add_row(name, "yes" if row["success"] else "[red]no[/]", _cell(row["tracked_s"]), *[_cell(row.get(c)) for c in cols])
+        agg = table["aggregate"]
+        out.add_row("[bold]all clips", f"{agg['succeeded']}/{agg['total']}", _cell(agg["tracked_s"]), *[_cell(agg.get(c)) for c in cols])
+        out.add_row("[bold]successful", "", "", *[_cell(agg.get(f"{c}_succ")) for c in cols])
+        Console().print(out)
+        Console().print(f"success rate {100 * agg['success_rate']:.1f}% ({agg['succeeded']}/{agg['total']}); {PROTOCOL}")
+        if json_out is not None:
+            json_out.parent.mkdir(parents=True, exist_ok=True)
+            json_out.write_text(json.dumps(table, indent=2) + "\n")
+            Console().print(f"wrote {json_out}")
+        if video is not None:
+            video.mkdir(parents=True, exist_ok=True)
+            for name in lib.clip_names:
+                seconds = loop if (loop and bool(lib.loops[lib.clip_index(name)])) else float(lib.durations[lib.clip_index(name)])
+                path = record_video(imitator, lib, make_sim, name, seconds, video / f"{name}.mp4")
+                if path is None:
+                    console.print("[yellow]videos skipped[/]: the simulator cannot render")
+                    break
+                console.print(f"video: {path}")
 
 
 @hookimpl

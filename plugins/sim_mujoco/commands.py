@@ -1,0 +1,118 @@
+"""``mocap render``: kinematic playback of a motion clip into an MP4 or GIF (offscreen MuJoCo).
+
+``mocap render --motion NAME [--source deepmimic] [--path P ...] [--humanoid amp] [--out NAME.mp4]
+[--seconds S] [--fps 30] [--width 640] [--height 480]`` loads the clip from a registered motion
+source, samples it with the :class:`~mocap.motion.library.MotionLibrary` every ``1/fps`` s from 0 to
+``seconds`` (default: the clip's duration; looping clips continue past it, moving on by one cycle
+offset per cycle) and renders each pose with :class:`~mocap_sim_mujoco.render.VideoRecorder`
+(tracking camera, checkered floor). Bad input (unknown motion, source or humanoid, bad sizes, an
+unsupported file type) and a missing OpenGL backend are one message on stderr and exit code 2.
+"""
+
+from __future__ import annotations
+
+import difflib
+from pathlib import Path
+from typing import Annotated, Any, Optional
+
+import typer
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+from mocap.hooks import hookimpl
+
+EXIT_USER_ERROR = 2
+MAX_VIDEO_BYTES = 4 * 2**30  # frames are kept in memory until the video is written
+
+
+def _fail(message: str) -> typer.Exit:
+    Console(stderr=True, soft_wrap=True).print(f"[red]error:[/] {message}", highlight=False)
+    return typer.Exit(EXIT_USER_ERROR)
+
+
+def cmd_render(
+    motion: Annotated[str, typer.Option("--motion", "-m", help="clip name (as `mocap motions list` prints it)")],
+    source: Annotated[str, typer.Option("--source", help="registered motion source (deepmimic, amass, npz, ...)")] = "deepmimic",
+    path: Annotated[
+        Optional[list[Path]], typer.Option("--path", "-p", help="file or folder for the source's 'paths' (repeatable)", show_default=False)
+    ] = None,
+    humanoid: Annotated[
+        Optional[str], typer.Option("--humanoid", help="humanoid to load onto (default: the source's own, e.g. amp for deepmimic)")
+    ] = None,
+    out: Annotated[Optional[Path], typer.Option("--out", "-o", help="output .mp4 or .gif (default: <motion>.mp4)")] = None,
+    seconds: Annotated[Optional[float], typer.Option("--seconds", help="length of the video, s (default: the clip's duration)")] = None,
+    fps: Annotated[float, typer.Option("--fps", help="frame rate of the video, Hz")] = 30.0,
+    width: Annotated[int, typer.Option("--width", help="frame width, pixels")] = 640,
+    height: Annotated[int, typer.Option("--height", help="frame height, pixels")] = 480,
+) -> None:
+    """Render a motion clip (kinematic playback) to an MP4 or GIF video."""
+    from mocap.motion.commands import load_motion_set
+
+    out_path = out if out is not None else Path(f"{motion}.mp4")
+    if out_path.suffix.lower() not in (".mp4", ".gif"):
+        raise _fail(f"--out {str(out_path)!r}: the video must be a .mp4 or .gif file")
+    if not fps > 0 or fps > 1000:
+        raise _fail(f"--fps must be in (0, 1000], got {fps:g}")
+    if not (16 <= width <= 8192 and 16 <= height <= 8192):
+        raise _fail(f"--width/--height must be 16..8192 pixels, got {width}x{height}")
+    if seconds is not None and not seconds > 0:
+        raise _fail(f"--seconds must be positive, got {seconds:g}")
+
+    mset, hname = load_motion_set(source, path, None, humanoid)
+    names = [c.name for c in mset.clips]
+    if motion not in names:
+        close = difflib.get_close_matches(motion, names, n=3)
+        hint = f" (did you mean {', '.join(close)}?)" if close else ""
+        raise _fail(f"no motion {motion!r} in source {source!r}{hint}; available: {', '.join(names) or '(none)'}")
+
+    frames, skeleton, n = _sample(mset.clips[names.index(motion)], hname, seconds, fps)
+    if n * width * height * 3 > MAX_VIDEO_BYTES:
+        raise _fail(
+            f"{n} frames of {width}x{height} need {n * width * height * 3 / 2**30:.1f} GiB in memory "
+            f"(limit {MAX_VIDEO_BYTES / 2**30:.0f} GiB): lower --seconds, --fps or the frame size"
+        )
+
+    from mocap.cli import UserError
+
+    try:  # importing the module can already fail: mujoco loads the MUJOCO_GL backend on import
+        from mocap_sim_mujoco.render import VideoRecorder
+
+        recorder = VideoRecorder(skeleton, width=width, height=height, fps=fps)
+    except UserError as exc:  # RenderUnavailable
+        raise _fail(str(exc)) from None
+    err = Console(stderr=True)
+    with recorder, Progress(
+        TextColumn("rendering {task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
+        console=err, transient=True,
+    ) as progress:
+        task = progress.add_task(motion, total=n)
+        for i in range(n):
+            recorder.add_frame(frames.root_pos[i], frames.root_rot[i], frames.dof_pos[i])
+            progress.advance(task)
+        try:
+            written = recorder.save(out_path)
+        except OSError as exc:
+            raise _fail(f"cannot write {out_path}: {exc}") from None
+    Console(soft_wrap=True).print(
+        f"wrote {written} ({n} frames, {width}x{height}, {fps:g} fps, {n / fps:.2f} s)", highlight=False
+    )
+
+
+def _sample(clip: Any, humanoid: str, seconds: float | None, fps: float) -> tuple[Any, Any, int]:
+    """MotionFrames of ``clip`` every ``1/fps`` s over ``[0, seconds]``, its skeleton, the frame count."""
+    import torch
+
+    from mocap.motion.library import MotionLibrary
+    from mocap.plugins import get_plugins
+
+    skeleton = get_plugins().get("humanoid", humanoid).build({})
+    lib = MotionLibrary([clip], skeleton, dtype=torch.float64)
+    length = float(lib.durations[0]) if seconds is None else float(seconds)
+    n = max(1, int(length * fps + 1e-6) + 1)
+    times = torch.arange(n, dtype=torch.float64) / fps
+    return lib.frames(torch.zeros(n, dtype=torch.long), times), skeleton, n
+
+
+@hookimpl
+def register_commands(app: Any) -> None:
+    app.command("render")(cmd_render)
