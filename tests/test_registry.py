@@ -106,3 +106,23 @@ def test_builtin_plugins_load_through_entry_points():
     for name in ("humanoids", "motion", "sim_mujoco"):
         assert names[name].package == "mocap"
         assert names[name].hooks, f"built-in plugin {name} implements no hook"
+
+
+def test_entry_point_that_fails_to_import_is_reported_in_one_line(monkeypatch):
+    from importlib import metadata
+
+    import mocap.plugins as plugins_module
+
+    real = metadata.entry_points
+
+    def fake(group=None, **kw):
+        eps = list(real(group=group, **kw)) if group else []
+        bad = metadata.EntryPoint(name="broken_dist", value="mocap_no_such_module_xyz", group="mocap")
+        return [*eps, bad]
+
+    monkeypatch.setattr(plugins_module.metadata, "entry_points", fake)
+    pset = load_plugins()
+    (failure,) = [f for f in pset.failures if f.name == "broken_dist"]
+    line = failure.line()
+    assert "\n" not in line and "broken_dist" in line and "mocap_no_such_module_xyz" in line
+    assert "amp" in pset.names("humanoid")  # the others keep working
