@@ -14,6 +14,7 @@ and optionally a video of one clip with the reference drawn as a ghost.
 from __future__ import annotations
 
 import math
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Callable, Optional
@@ -332,7 +333,11 @@ def load_evaluation_target(target: Path, plugins: Any) -> tuple[Any, Path | None
         if resolved.spec.imitator is None:
             raise UserError(f"{spec_file}: the run has no imitator stage to evaluate")
         if checkpoint is None and resolved.spec.imitator.trainer is not None:
-            raise UserError(f"{target}: the imitator stage has not finished (no checkpoint in stages.json); run it first")
+            from mocap.pipeline import stage_keys
+
+            partial = sorted((target.parent / "artifacts" / f"imitator-{stage_keys(resolved.spec)['imitator']}").glob("*.pt"))
+            hint = f"; evaluate its latest training checkpoint instead: mocap eval {partial[0]}" if partial else "; run it first"
+            raise UserError(f"{target}: the imitator stage has not finished (no checkpoint in stages.json){hint}")
         return resolved, checkpoint
     if not target.is_file():
         raise UserError(f"{target}: no such checkpoint file or run directory")
@@ -405,12 +410,13 @@ def register_commands(app):  # type: ignore[no-untyped-def]
         agg = table["aggregate"]
         out.add_row("[bold]all clips", f"{agg['succeeded']}/{agg['total']}", _cell(agg["tracked_s"]), *[_cell(agg.get(c)) for c in cols])
         out.add_row("[bold]successful", "", "", *[_cell(agg.get(f"{c}_succ")) for c in cols])
-        Console().print(out)
-        Console().print(f"success rate {100 * agg['success_rate']:.1f}% ({agg['succeeded']}/{agg['total']}); {PROTOCOL}")
+        stdout = Console(width=None if sys.stdout.isatty() else 160)
+        stdout.print(out)
+        stdout.print(f"success rate {100 * agg['success_rate']:.1f}% ({agg['succeeded']}/{agg['total']}); {PROTOCOL}")
         if json_out is not None:
             json_out.parent.mkdir(parents=True, exist_ok=True)
             json_out.write_text(json.dumps(table, indent=2) + "\n")
-            Console().print(f"wrote {json_out}")
+            stdout.print(f"wrote {json_out}")
         if video is not None:
             video.mkdir(parents=True, exist_ok=True)
             for name in lib.clip_names:

@@ -273,12 +273,17 @@ def save_policy(path: Path, model: ActorCritic, extra: dict[str, Any] | None = N
 
 
 def load_policy(path: Path, map_location: str | torch.device = "cpu") -> ActorCritic:
-    """Rebuild the :class:`ActorCritic` saved by :func:`save_policy` (eval mode, on ``map_location``)."""
+    """Rebuild the :class:`ActorCritic` saved by :func:`save_policy`, or the current policy inside a
+    trainer's resumable checkpoint (PPO's ``ppo.pt``), in eval mode on ``map_location``."""
     data = load_checkpoint(Path(path), map_location=map_location)
-    if data.get("format") != POLICY_FORMAT:
+    if data.get("format") == POLICY_FORMAT:
+        config, state = data["config"], data["state_dict"]
+    elif "policy_config" in data and "model" in data:  # a trainer's resumable checkpoint (e.g. ppo.pt mid-training)
+        config, state = data["policy_config"], data["model"]
+    else:
         raise ValueError(f"{path}: not a policy file (format {data.get('format')!r}, expected {POLICY_FORMAT!r})")
-    model = ActorCritic.from_config(data["config"])
-    model.load_state_dict(data["state_dict"])
+    model = ActorCritic.from_config(config)
+    model.load_state_dict(state)
     return model.to(map_location).eval()
 
 
