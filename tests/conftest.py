@@ -20,3 +20,18 @@ def toy_plugins():
     CountTrainer.calls.clear()
     with use_plugins(("toy", toy)) as pset:
         yield pset
+
+
+@pytest.fixture(scope="session")
+def amp():
+    """The default ``amp`` skeleton (shared: skeletons are immutable)."""
+    from mocap.humanoids.amp import amp_skeleton
+
+    return amp_skeleton()
+
+
+@pytest.fixture(scope="session")
+def smpl():
+    from mocap.humanoids.smpl import smpl_skeleton
+
+    return smpl_skeleton()

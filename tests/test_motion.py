@@ -13,7 +13,6 @@ import typer
 from typer.testing import CliRunner
 
 from mocap.humanoids.amp import amp_skeleton
-from mocap.humanoids.smpl import smpl_skeleton
 from mocap.motion import plugin
 from mocap.motion.amass import SMPL_JOINT_NAMES, AmassParams, AmassSource, load_amass_file
 from mocap.motion.clip import Clip, MotionDataError
@@ -23,16 +22,6 @@ from mocap.motion.sources import MotionSet, NpzParams, NpzSource
 from mocap.rotations import heading_angle, quat_apply, quat_from_axis_angle
 
 WALK_FILE = "humanoid3d_walk.txt"
-
-
-@pytest.fixture(scope="module")
-def amp():
-    return amp_skeleton()
-
-
-@pytest.fixture(scope="module")
-def smpl():
-    return smpl_skeleton()
 
 
 @pytest.fixture(scope="module")

@@ -30,7 +30,7 @@ except ImportError:  # not yet mapped: load the package from its folder
 import mocap_phc.plugin
 from mocap.baselines import PDReplay
 from mocap.evaluation import rollout_imitation
-from mocap.humanoids import amp_skeleton, smpl_skeleton
+from mocap.humanoids import smpl_skeleton
 from mocap.motion.deepmimic import DeepMimicParams, DeepMimicSource
 from mocap.motion.library import MotionLibrary
 from mocap.observations import ROT_GOAL_COLUMNS, imitation_goal_rot
@@ -46,11 +46,6 @@ seeds = st.integers(0, 2**32 - 1)
 
 
 # ------------------------------------------------------------------------------------ fixtures
-@pytest.fixture(scope="module")
-def amp():
-    return amp_skeleton()
-
-
 @pytest.fixture(scope="module")
 def clips(amp):
     """walk (looping, 1.27 s) and kick (non-looping, 1.53 s)."""

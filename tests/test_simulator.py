@@ -10,8 +10,6 @@ import numpy as np
 import pytest
 import torch
 
-from mocap.humanoids.amp import amp_skeleton
-from mocap.humanoids.smpl import smpl_skeleton
 from mocap.kinematics import forward_kinematics_dofs
 from mocap.rotations import quat_from_rotvec, quat_mul, quat_normalize, quat_to_rotvec, quat_conjugate
 from mocap.state import HumanoidState, SimState
@@ -20,16 +18,6 @@ from mocap_sim_mujoco.simulator import MujocoParams, MujocoSimulator, TargetPara
 from mocap_sim_mujoco.terrain import TerrainParams
 
 F64 = torch.float64
-
-
-@pytest.fixture(scope="module")
-def amp():
-    return amp_skeleton()
-
-
-@pytest.fixture(scope="module")
-def smpl():
-    return smpl_skeleton()
 
 
 @pytest.fixture(scope="module")

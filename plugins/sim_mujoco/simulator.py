@@ -75,6 +75,7 @@ Props (all optional, per env, see :class:`MujocoParams`):
 from __future__ import annotations
 
 import math
+from typing import Any
 import os
 from dataclasses import dataclass, replace
 
