@@ -22,7 +22,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Protocol, Sequence
 
 import torch
 from torch import Tensor
@@ -96,12 +96,23 @@ class Simulator(ABC):
 class Imitator(ABC):
     """A motion-imitation policy: proprioception + imitation goal -> PD targets.
 
-    A trained imitator (PHC/PHC+) is the teacher that latent spaces distill from.
+    A trained imitator (PHC/PHC+) is the teacher that latent spaces distill from. A policy-based
+    imitator separates its raw policy output (``policy_output``, e.g. PHC's normalized action or
+    residual) from the mapping to PD targets (``to_pd_targets``), so that a student (a latent
+    space's decoder) can learn the raw output and reuse the teacher's mapping.
     """
 
     @abstractmethod
     def act(self, obs: Observations, deterministic: bool = True) -> Tensor:
         """(N, D) PD targets, rad, from ``obs.proprio`` (N, P) and ``obs.goal`` (N, G)."""
+
+    def policy_output(self, obs: Observations, deterministic: bool = True) -> Tensor:
+        """(N, A) the raw policy output before the PD-target mapping (default: the PD targets)."""
+        return self.act(obs, deterministic)
+
+    def to_pd_targets(self, obs: Observations, output: Tensor) -> Tensor:
+        """Map a raw output (N, A) to PD targets (N, D) (default: identity)."""
+        return output
 
     @abstractmethod
     def observe(self, state: SimState, reference: MotionFrames) -> Observations:
@@ -153,6 +164,28 @@ class LatentSpace(torch.nn.Module, ABC):
     @abstractmethod
     def to_latent(self, obs: Observations, task_action: Tensor) -> Tensor:
         """Map a task action (residual, absolute latent or code indices) to z (N, Z)."""
+
+
+class DistillableLatent(Protocol):
+    """What the shared ``distill`` trainer needs from a latent space (PULSE, Hybrid-RVQ, ...).
+
+    The student sees the teacher's observation (``Observations``: proprio + imitation goal) and
+    learns the teacher's raw policy output (:meth:`Imitator.policy_output`); the simulator is
+    stepped with ``teacher.to_pd_targets(obs, student_action(obs))``.
+    """
+
+    def student_action(self, obs: Observations, sample: bool = True) -> Tensor:
+        """(N, A) the student's action: z from the encoder (sampled, or its mean), decoder mean."""
+        ...
+
+    def distill_losses(self, obs: Observations, teacher_output: Tensor, starts: Tensor, progress: float) -> dict[str, Tensor]:
+        """Losses on a (T, N) rollout chunk in time order (``obs`` fields are (T, N, ...)).
+
+        ``teacher_output`` (T, N, A); ``starts`` (T, N) bool marks the first step of an episode
+        (temporal terms must not cross it); ``progress`` in [0, 1] drives schedules (e.g. the KL
+        weight). Returns named scalars including ``"loss"``, the total to minimize.
+        """
+        ...
 
 
 # ---------------------------------------------------------------------------------------- task
@@ -230,6 +263,7 @@ Factory = Callable[..., Any]
 __all__: Sequence[str] = (
     "ActionSpace",
     "Box",
+    "DistillableLatent",
     "Imitator",
     "LatentSample",
     "LatentSpace",

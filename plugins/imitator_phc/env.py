@@ -194,10 +194,15 @@ class PolicyImitator(Imitator):
                 return out[0] if isinstance(out, tuple) else out
             return self.policy(x)
 
+    def policy_output(self, obs: Observations, deterministic: bool = True) -> Tensor:
+        """The policy's raw action (normalized absolute targets or a residual), before :class:`ActionMap`."""
+        return self.policy_action(PHCObservation.flatten(obs), deterministic).to(obs.proprio.device)
+
+    def to_pd_targets(self, obs: Observations, output: Tensor) -> Tensor:
+        return self.action_map(output, obs.extra.get("ref_dof_pos"))
+
     def act(self, obs: Observations, deterministic: bool = True) -> Tensor:
-        a = self.policy_action(PHCObservation.flatten(obs), deterministic)
-        ref = obs.extra.get("ref_dof_pos")
-        return self.action_map(a.to(obs.proprio.device), ref)
+        return self.to_pd_targets(obs, self.policy_output(obs, deterministic))
 
 
 # ---------------------------------------------------------------------------------------- env
