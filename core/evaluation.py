@@ -223,15 +223,15 @@ class ImitationEval(Trainer):
             return ctx.build("simulator", skeleton=skeleton, num_envs=n, seed=ctx.seed)
 
         table = evaluate_imitator(imitator, lib, make_sim, p, self._metrics(ctx), ctx.console)
-        atomic_write_json(ctx.workdir / "imitation_eval.json", table)
-        atomic_write_json(Path(ctx.run_dir) / "imitation_eval.json", table)
-        atomic_write_text(Path(ctx.run_dir) / "imitation_eval.md", render_table(table))
+        atomic_write_json(ctx.publish("imitation_eval.json"), table)
+        atomic_write_text(ctx.publish("imitation_eval.md"), render_table(table))
         numeric = {k: float(v) for k, v in table["aggregate"].items() if isinstance(v, (int, float))}
         ctx.log.log(0, **numeric)
         if p.video:
             clip = p.video_clip or lib.clip_names[0]
-            path = record_video(imitator, lib, make_sim, clip, p.video_seconds, Path(ctx.run_dir) / f"imitation_{clip}.{p.video_format}")
-            ctx.console.print(f"video: {path}" if path else "[yellow]video skipped[/]: the simulator cannot render")
+            name = f"imitation_{clip}.{p.video_format}"
+            path = record_video(imitator, lib, make_sim, clip, p.video_seconds, ctx.publish(name))
+            ctx.console.print(f"video: {Path(ctx.run_dir) / name}" if path else "[yellow]video skipped[/]: the simulator cannot render")
         return StageResult(checkpoint=None, metrics=numeric)
 
     def _metrics(self, ctx) -> list[Metric]:  # type: ignore[no-untyped-def]

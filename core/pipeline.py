@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import shutil
 import signal
 import time
 from dataclasses import dataclass, field
@@ -38,6 +39,7 @@ from mocap.spec import STAGES, ResolvedSpec, Spec
 
 ARTIFACT_FORMAT = 1
 DONE_FILE = "DONE.json"
+PUBLISHED_DIR = "published"  # files a stage publishes to the run directory, kept for reuse
 
 #: sections every stage depends on, besides its own and its upstream stages
 _CONTEXT_SECTIONS = ("humanoid", "motions", "simulator", "seed")
@@ -170,6 +172,13 @@ class StageContext:
     def spec_yaml(self) -> str:
         return self.resolved.to_yaml()
 
+    def publish(self, name: str) -> Path:
+        """Path under which to write an output file ``name`` for the run directory (a table, a
+        video). The pipeline copies it there; a later run that reuses this stage gets it too."""
+        path = self.workdir / PUBLISHED_DIR / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        return path
+
 
 @dataclass
 class StageRecord:
@@ -270,6 +279,11 @@ def _run_stage(
     if done.is_file():
         result = _read_result(done)
         console.print(f"[green]{stage}[/]: reusing the trained artifact {workdir} (same {stage} section and upstream as an earlier run)")
+        published = workdir / PUBLISHED_DIR
+        if published.is_dir():  # the stage's tables and videos belong in this run directory too
+            for item in published.iterdir():
+                if item.is_file():
+                    shutil.copy2(item, out_dir / item.name)
         return StageRecord(stage, key, workdir, result, True, 0.0)
     checkpoint = getattr(section, "checkpoint", None)
     if checkpoint is not None:
@@ -304,6 +318,11 @@ def _run_stage(
         result = trainer.run(ctx)
     finally:
         log.close()
+        published = workdir / PUBLISHED_DIR
+        if published.is_dir():
+            for item in published.iterdir():
+                if item.is_file():
+                    shutil.copy2(item, out_dir / item.name)
     if not stop.requested:
         atomic_write_json(
             done,

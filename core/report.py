@@ -19,7 +19,9 @@ def _fmt(value: object) -> str:
     return str(value)
 
 
-def render_report(resolved: "ResolvedSpec", records: list["StageRecord"], wall_seconds: float) -> str:
+def render_report(
+    resolved: "ResolvedSpec", records: list["StageRecord"], wall_seconds: float, out_dir: Path | None = None
+) -> str:
     spec = resolved.spec
     lines = [f"# {spec.name}", ""]
     if spec.description:
@@ -44,6 +46,14 @@ def render_report(resolved: "ResolvedSpec", records: list["StageRecord"], wall_s
             continue
         lines += ["", f"## {r.stage} metrics", "", "| metric | value |", "|---|---|"]
         lines += [f"| {k} | {_fmt(v)} |" for k, v in sorted(r.result.metrics.items())]
+    if out_dir is not None:
+        for table in sorted(Path(out_dir).glob("*.md")):
+            if table.name != "report.md":  # stage tables (e.g. imitation_eval.md), one level down in headings
+                body = table.read_text(encoding="utf-8").strip().splitlines()
+                lines += ["", *[("#" + line) if line.startswith("#") else line for line in body]]
+        media = sorted(p.name for p in Path(out_dir).iterdir() if p.suffix in (".mp4", ".gif", ".png"))
+        if media:
+            lines += ["", "## Videos and plots", "", *[f"- [{name}]({name})" for name in media]]
     versions = package_versions()
     hw = hardware()
     lines += [
@@ -62,5 +72,5 @@ def render_report(resolved: "ResolvedSpec", records: list["StageRecord"], wall_s
 
 def write_report(out_dir: Path, resolved: "ResolvedSpec", records: list["StageRecord"], wall_seconds: float) -> Path:
     path = Path(out_dir) / "report.md"
-    atomic_write_text(path, render_report(resolved, records, wall_seconds))
+    atomic_write_text(path, render_report(resolved, records, wall_seconds, out_dir))
     return path

@@ -1,0 +1,94 @@
+"""An :class:`~mocap.interfaces.Imitator` made of a latent space and the imitator it was distilled from.
+
+PULSE (Table 1) and the other distilled latent spaces are evaluated *as imitators*: the teacher's
+observation (proprioception + next-frame imitation goal), ``z`` = the encoder's mean, the decoder's
+action, and the teacher's mapping from raw policy output to PD targets. :class:`LatentImitator`
+packages exactly that, so :func:`mocap.evaluation.evaluate_imitator`, ``rollout_imitation`` and
+``mocap eval`` treat a latent space like any imitator.
+
+Two kinds of latent space are handled:
+
+* a :class:`~mocap.interfaces.DistillableLatent` (it has ``student_action``): its output is in the
+  teacher's raw policy-output space, mapped by ``imitator.to_pd_targets``;
+* any other :class:`~mocap.interfaces.LatentSpace`: ``decoder(obs, encoder(obs).mean)`` already
+  gives PD targets.
+
+A latent space that can map its decoder output to PD targets once it knows the teacher
+(``attach_imitator(imitator)``, e.g. PULSE) is attached on construction.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import torch
+from torch import Tensor
+
+from mocap.interfaces import Imitator, LatentSpace
+from mocap.state import MotionFrames, Observations, SimState
+
+
+def observations_to(obs: Observations, device: torch.device | str) -> Observations:
+    """A copy of ``obs`` with every tensor on ``device``."""
+    return Observations(
+        proprio=obs.proprio.to(device),
+        goal=None if obs.goal is None else obs.goal.to(device),
+        extra={k: v.to(device) if isinstance(v, Tensor) else v for k, v in obs.extra.items()},
+    )
+
+
+class LatentImitator(Imitator):
+    """Imitate with ``latent`` (module docstring); ``imitator`` supplies ``observe`` and ``to_pd_targets``.
+
+    Args:
+        imitator: the teacher (the imitator the latent space was distilled from, or one with the
+            same observation and action mapping).
+        latent: the trained latent space.
+        device: where the latent's networks run (default: where its parameters are).
+
+    ``act(obs, deterministic=True)`` uses ``z`` = the encoder mean (the paper's evaluation);
+    ``deterministic=False`` samples ``z`` from the encoder.
+    """
+
+    def __init__(self, imitator: Imitator, latent: LatentSpace, device: torch.device | str | None = None):
+        self.imitator = imitator
+        self.latent = latent
+        if device is None:
+            first = next(iter(latent.parameters()), None)
+            device = first.device if first is not None else "cpu"
+        self.device = torch.device(device)
+        self.distillable = hasattr(latent, "student_action")
+        attach = getattr(latent, "attach_imitator", None)
+        if callable(attach):
+            attach(imitator)
+
+    def observe(self, state: SimState, reference: MotionFrames) -> Observations:
+        return self.imitator.observe(state, reference)
+
+    def policy_output(self, obs: Observations, deterministic: bool = True) -> Tensor:
+        """The latent's action: the student's raw output (distillable latents) or PD targets (others)."""
+        x = observations_to(obs, self.device)
+        with torch.no_grad():
+            if self.distillable:
+                out = self.latent.student_action(x, sample=not deterministic)  # type: ignore[attr-defined]
+            else:
+                enc = self.latent.encoder(x)
+                z = enc.mean if deterministic or enc.std is None else enc.mean + enc.std * torch.randn_like(enc.mean)
+                out = self.latent.decoder(x, z)
+        return out.to(obs.proprio.device)
+
+    def to_pd_targets(self, obs: Observations, output: Tensor) -> Tensor:
+        return self.imitator.to_pd_targets(obs, output) if self.distillable else output
+
+    def act(self, obs: Observations, deterministic: bool = True) -> Tensor:
+        return self.to_pd_targets(obs, self.policy_output(obs, deterministic))
+
+
+def latent_imitator(imitator: Any, latent: Any, device: torch.device | str | None = None) -> LatentImitator:
+    """Convenience: ``LatentImitator(imitator, latent, device)`` with the latent in eval mode."""
+    if hasattr(latent, "eval"):
+        latent.eval()
+    return LatentImitator(imitator, latent, device)
+
+
+__all__ = ["LatentImitator", "latent_imitator", "observations_to"]
