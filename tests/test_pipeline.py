@@ -63,6 +63,9 @@ def test_run_writes_run_dir_and_second_spec_reuses_shared_imitator(tmp_path: Pat
     assert CountTrainer.calls == ["latent"]
     assert records_b[0].workdir == records[0].workdir
     assert "reused" in (out_b / "stages.json").read_text()
+    # what the reused stage published (tables, videos) is in the new run directory too
+    assert (out_b / "imitator_count.txt").read_text() == "3" and (out / "imitator_count.txt").is_file()
+    assert "[imitator_count.txt]" not in (out_b / "report.md").read_text()  # only media are linked
 
 
 def test_interrupt_then_rerun_resumes_and_finishes(tmp_path: Path):

@@ -53,6 +53,7 @@ class CountTrainer(Trainer):
                 os.kill(os.getpid(), signal.SIGINT)  # the user presses Ctrl-C
             if ctx.should_stop():
                 break
+        ctx.publish(f"{ctx.stage}_count.txt").write_text(str(load_checkpoint(path)["iteration"]))
         return StageResult(checkpoint=path, metrics={"iterations": float(load_checkpoint(path)["iteration"])})
 
 
