@@ -4,10 +4,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import importlib.util
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,16 +13,6 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 torch.set_num_threads(1)
-
-try:  # installed (pyproject maps plugins/imitator_phc -> mocap_phc)
-    import mocap_phc  # noqa: F401
-except ImportError:  # not yet mapped: load the package from its folder
-    _init = Path(__file__).resolve().parents[1] / "plugins" / "imitator_phc" / "__init__.py"
-    _spec = importlib.util.spec_from_file_location("mocap_phc", _init, submodule_search_locations=[str(_init.parent)])
-    assert _spec is not None and _spec.loader is not None
-    _mod = importlib.util.module_from_spec(_spec)
-    sys.modules["mocap_phc"] = _mod
-    _spec.loader.exec_module(_mod)
 
 import mocap_phc.plugin
 from mocap.baselines import PDReplay
