@@ -1,0 +1,774 @@
+"""Online distillation of an imitator into a latent space (trainer ``distill``), DAgger style.
+
+Works for any latent space implementing :class:`~mocap.interfaces.DistillableLatent` (PULSE,
+Hybrid-RVQ, a third-party one); the trainer knows nothing of their internals. PULSE's Alg. 1
+``TrainPULSE`` (digest pulse §4.3) is the reference:
+
+* **Teacher** = the ``imitator`` stage's trained component; **student** = the ``latent`` stage's
+  component (an ``nn.Module``). Both see the teacher's observation :class:`~mocap.state.Observations`
+  (proprioception + next-frame imitation goal); the student learns the teacher's raw
+  :meth:`~mocap.interfaces.Imitator.policy_output`.
+* **Rollouts**: ``num_envs`` simulator envs; reference-state initialization at a (clip, time) drawn
+  with the motion library's sampling weights (non-looping clips start at most one step before their
+  end). Each step::
+
+      obs          = teacher.observe(state, reference at t + dt)
+      teacher_out  = teacher.policy_output(obs, deterministic=True)        (the label)
+      student_out  = student.student_action(obs, sample=sample_latent)     (z ~ E, decoder mean)
+      state        = sim.step(teacher.to_pd_targets(obs, acting output))
+
+  The acting output is the student's (``act_with: student``, PULSE), the teacher's (behaviour
+  cloning), or per env and step the teacher's with probability β and the student's otherwise
+  (``mixture``: DAgger's β_i, annealed linearly from ``mixture_beta[0]`` at progress 0 to
+  ``mixture_beta[1]`` at ``mixture_anneal_end``).
+* **Episodes** end by *termination* when the mean body-position error exceeds
+  ``termination_threshold`` (0.5 m, the evaluation protocol's criterion; PHC+ training uses 0.25 m on
+  any body) or the simulator flags numerical instability, and by *truncation* after
+  ``episode_steps`` or at the end of a non-looping clip. Finished envs are reset at once.
+* **Update**: every iteration collects a (T, N) chunk (``horizon`` × ``num_envs``) of observations,
+  teacher outputs and episode-start flags; ``epochs`` passes over minibatches of ``minibatch_envs``
+  env columns (each keeping its T steps in time order, for temporal loss terms) minimize
+  ``student.distill_losses(...)["loss"]`` with Adam and a global gradient-norm clip. ``progress``
+  (env steps / budget, in [0, 1]) is passed for the latent's schedules.
+* **Hard negatives** (PHC+ soft mining, digest pulse §3.3): per-clip failure counts ``f`` and clip
+  sampling probabilities ``(1 − floor) f / Σf + floor · b`` (``b``: the library's initial weights).
+  ``f`` grows by each clip's failure rate over every ``update_every`` finished training episodes and
+  by 1 for each clip failed in a periodic evaluation.
+* **Evaluation** every ``eval_every`` iterations (and at the end): the student as an imitator
+  (:class:`~mocap.latent_imitator.LatentImitator`, ``z`` = encoder mean) through
+  :func:`mocap.evaluation.evaluate_imitator`; logs ``eval/success_rate``, ``eval/mpjpe_g``, ...
+
+Optional student methods, used when present: ``init_from_teacher(teacher)`` before training
+starts (e.g. to copy the teacher's input statistics), ``update_normalizers(obs)`` with each chunk
+before the update, ``config`` (a dict saved with the weights).
+
+Files in the stage directory: ``distill.pt`` (resumable: student, optimizer, RNG states, counters,
+env state incl. MuJoCo physics, clip weights and failure counts, params, spec) and, at the end,
+``latent.pt`` (:func:`save_latent`; a latent factory loads it with :func:`load_latent_state`). A
+run resumed from ``distill.pt`` produces the same weights as an uninterrupted one (CPU).
+"""
+
+from __future__ import annotations
+
+import math
+import random
+import time
+from collections import deque
+from pathlib import Path
+from typing import Any, Callable, Literal
+
+import numpy as np
+import torch
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+from torch import Tensor
+
+from mocap.checkpoint import load_checkpoint, save_checkpoint
+from mocap.hooks import hookimpl
+from mocap.interfaces import Imitator, Simulator, StageResult, Trainer
+from mocap.latent_imitator import LatentImitator, observations_to
+from mocap.motion.library import MotionLibrary
+from mocap.state import HumanoidState, MotionFrames, Observations, SimState
+
+CHECKPOINT_FORMAT = "mocap.distill/1"
+CHECKPOINT_NAME = "distill.pt"
+LATENT_FORMAT = "mocap.latent/1"
+LATENT_NAME = "latent.pt"
+EPISODE_WINDOW = 100
+
+
+# ---------------------------------------------------------------------------------- parameters
+class DistillParams(BaseModel):
+    """Online distillation ([P] PULSE paper, [CODE] official PULSE code, [CPU] 2-core default)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    num_envs: int = Field(64, ge=1, description="parallel envs ([CODE]/[P] Table 4 'batch size' 3072; [CPU] 64)")
+    horizon: int = Field(32, ge=1, description="steps per env per iteration; chunk = num_envs × horizon ([CODE] 32)")
+    total_env_steps: int = Field(2_000_000, ge=1, description="budget in env steps, rounded up to whole iterations ([P] ~1e9)")
+    epochs: int = Field(2, ge=1, description="passes over each chunk")
+    minibatch_envs: int = Field(
+        16, ge=1, description="env columns per minibatch; each keeps its horizon steps in time order (minibatch = this × horizon samples)"
+    )
+    lr: float = Field(5e-4, gt=0, description="Adam learning rate ([P] 5e-4)")
+    max_grad_norm: float | None = Field(50.0, gt=0, description="global gradient-norm clip; None = off ([CODE] 50)")
+    act_with: Literal["student", "teacher", "mixture"] = Field(
+        "student",
+        description="who drives the simulator: 'student' ([P] PULSE/DAgger: the student acts, the teacher labels), "
+        "'teacher' (behaviour cloning) or 'mixture' (DAgger's β: the teacher with probability β per env and step)",
+    )
+    mixture_beta: tuple[float, float] = Field(
+        (1.0, 0.0), description="'mixture': β at progress 0 and from mixture_anneal_end on (linear in between)"
+    )
+    mixture_anneal_end: float = Field(0.5, gt=0, le=1, description="'mixture': progress at which β reaches mixture_beta[1]")
+    sample_latent: bool = Field(True, description="rollouts sample z from the encoder ([P]/[CODE]); false: z = encoder mean")
+    termination_threshold: float = Field(
+        0.5, gt=0, description="terminate when the mean body-position error exceeds this, m ([P] success criterion 0.5; PHC+ training [CODE] 0.25 on any body)"
+    )
+    termination_grace: int = Field(0, ge=0, description="steps after a reset that are never checked for termination")
+    episode_steps: int = Field(300, ge=1, description="time limit in control steps ([CODE] 300 = 10 s at 30 Hz)")
+    hard_negative: bool = Field(True, description="clip sampling weights follow per-clip failure counts (PHC+ soft mining)")
+    hard_negative_floor: float = Field(0.2, ge=0, le=1, description="share of sampling mass kept on the base weights ([CODE] 0)")
+    hard_negative_decay: float = Field(1.0, gt=0, le=1, description="failure counts are multiplied by this before each addition ([CODE] 1)")
+    update_every: int = Field(256, ge=1, description="finished training episodes between failure-rate updates of the counts")
+    eval_every: int = Field(
+        50, ge=0, description="iterations between evaluations of the student as an imitator (also at the end); 0 disables ([CODE] 500 epochs)"
+    )
+    eval_num_envs: int = Field(64, ge=1, description="clips evaluated in parallel")
+    eval_horizon: float | None = Field(
+        None, gt=0, description="seconds per evaluation episode of looping clips; None: episode_steps × dt"
+    )
+    torch_threads: int | None = Field(1, ge=1, description="torch intra-op threads for this stage (None: keep the process setting)")
+    checkpoint_every: int = Field(10, ge=1, description="iterations between checkpoints (also at the end and on Ctrl-C)")
+    print_every: int = Field(10, ge=1, description="iterations between progress lines when the console is not a terminal")
+
+    @model_validator(mode="after")
+    def _check(self) -> "DistillParams":
+        if self.minibatch_envs > self.num_envs:
+            raise ValueError(f"minibatch_envs {self.minibatch_envs} exceeds num_envs {self.num_envs}")
+        for b in self.mixture_beta:
+            if not 0.0 <= b <= 1.0:
+                raise ValueError(f"mixture_beta values are probabilities in [0, 1], got {self.mixture_beta}")
+        return self
+
+    @property
+    def batch_size(self) -> int:
+        return self.num_envs * self.horizon
+
+    @property
+    def iterations(self) -> int:
+        return math.ceil(self.total_env_steps / self.batch_size)
+
+
+# ---------------------------------------------------------------------------------- pure helpers
+def failure_weights(fail_counts: Tensor, base: Tensor, floor: float) -> Tensor:
+    """Clip sampling probabilities ``(1 − floor) f / Σf + floor · b`` (``b`` normalized; ``b`` when Σf = 0).
+
+    Sums to 1; with ``floor = 0`` the support is exactly the clips that failed (PHC+); with
+    ``floor > 0`` every clip with ``b_c > 0`` keeps at least ``floor · b_c``.
+    """
+    f = fail_counts.to(torch.float64).clamp_min(0.0)
+    b = base.to(torch.float64)
+    b = b / b.sum()
+    total = f.sum()
+    if float(total) <= 0.0:
+        return b.clone()
+    w = (1.0 - floor) * f / total + floor * b
+    return w / w.sum()
+
+
+def mixture_beta(progress: float, start: float, end: float, anneal_end: float) -> float:
+    """DAgger's β (probability that the teacher acts): ``start`` at progress 0, linear to ``end`` at
+    ``anneal_end``, ``end`` afterwards."""
+    if progress >= anneal_end:
+        return float(end)
+    return float(start + (end - start) * max(progress, 0.0) / anneal_end)
+
+
+# ------------------------------------------------------------------------------ latent files
+def save_latent(path: Path, latent: torch.nn.Module, extra: dict[str, Any] | None = None, *, spec_yaml: str | None = None) -> None:
+    """Write a trained latent space (``config`` if it has one, weights, buffers) atomically to ``path``."""
+    state = {k: v.detach().cpu() if isinstance(v, Tensor) else v for k, v in latent.state_dict().items()}
+    save_checkpoint(
+        Path(path),
+        {"format": LATENT_FORMAT, "config": getattr(latent, "config", None), "state_dict": state, "extra": extra or {}},
+        spec_yaml=spec_yaml,
+    )
+
+
+def load_latent_state(path: Path, map_location: str | torch.device = "cpu") -> dict[str, Any]:
+    """``{"config", "state_dict", "extra", "spec"}`` of a latent file (:func:`save_latent`) or of the
+    student inside a resumable ``distill.pt``; a latent factory rebuilds its module from these."""
+    data = load_checkpoint(Path(path), map_location=map_location)
+    fmt = data.get("format")
+    if fmt == LATENT_FORMAT:
+        return {"config": data.get("config"), "state_dict": data["state_dict"], "extra": data.get("extra", {}), "spec": data.get("spec")}
+    if fmt == CHECKPOINT_FORMAT:
+        return {"config": data.get("latent_config"), "state_dict": data["student"], "extra": {}, "spec": data.get("spec")}
+    raise ValueError(f"{path}: not a latent-space file (format {fmt!r}, expected {LATENT_FORMAT!r} or {CHECKPOINT_FORMAT!r})")
+
+
+# --------------------------------------------------------------------------------- episodes
+def _rng_state() -> dict[str, Any]:
+    state = {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()}
+    if torch.cuda.is_available():  # pragma: no cover - no GPU in CI
+        state["cuda"] = torch.cuda.get_rng_state_all()
+    return state
+
+
+def _set_rng_state(state: dict[str, Any]) -> None:
+    torch.set_rng_state(state["torch"])
+    np.random.set_state(state["numpy"])
+    random.setstate(state["python"])
+    if "cuda" in state and torch.cuda.is_available():  # pragma: no cover
+        torch.cuda.set_rng_state_all(state["cuda"])
+
+
+_HUMANOID_FIELDS = (
+    "root_pos",
+    "root_rot",
+    "root_lin_vel",
+    "root_ang_vel",
+    "dof_pos",
+    "dof_vel",
+    "body_pos",
+    "body_rot",
+    "body_lin_vel",
+    "body_ang_vel",
+)
+
+
+class DistillEpisodes:
+    """The episode bookkeeping of the distillation rollouts: RSI resets, termination/truncation,
+    per-clip failure counts and hard-negative weights, and an exact ``state_dict`` (module doc)."""
+
+    def __init__(self, params: DistillParams, library: MotionLibrary, simulator: Simulator, seed: int = 0):
+        self.params = p = params
+        self.library = lib = library
+        self.sim = simulator
+        self.num_envs = N = int(simulator.num_envs)
+        self.dt = float(simulator.dt)
+        self.gen = torch.Generator().manual_seed(int(seed))
+        C = lib.num_clips
+        dev = lib.device
+        self.clip_ids = torch.zeros(N, dtype=torch.long, device=dev)
+        self.start_time = torch.zeros(N, dtype=torch.float64, device=dev)
+        self.progress = torch.zeros(N, dtype=torch.long, device=dev)
+        self.base_weights = lib.weights.detach().to("cpu", torch.float64).clone()
+        self.fail_counts = torch.zeros(C, dtype=torch.float64)
+        self.episodes_per_clip = torch.zeros(C, dtype=torch.long)
+        self.failures_per_clip = torch.zeros(C, dtype=torch.long)
+        self._win_episodes = torch.zeros(C, dtype=torch.float64)
+        self._win_failures = torch.zeros(C, dtype=torch.float64)
+        self._win_total = 0
+        self._durations = lib.durations.to(dev, torch.float64)
+        self._loops = lib.loops.to(dev)
+        self.threshold = p.termination_threshold
+
+    # ----------------------------------------------------------------------------- resets
+    def reset_envs(self, ids: Tensor) -> None:
+        n = int(ids.numel())
+        if n == 0:
+            return
+        clips, times = self.library.sample(n, generator=self.gen)
+        t0 = times.to(torch.float64)
+        dur = self._durations[clips]
+        latest = torch.where(self._loops[clips], dur, (dur - self.dt).clamp_min(0.0))
+        t0 = torch.minimum(t0, latest)
+        self.clip_ids[ids] = clips
+        self.start_time[ids] = t0
+        self.progress[ids] = 0
+        self.sim.reset(ids, self.library.frames(clips, t0))
+
+    def reset_all(self) -> None:
+        self.reset_envs(torch.arange(self.num_envs))
+
+    def reference_next(self) -> MotionFrames:
+        """The reference at the time the next step reaches (what ``observe`` gets)."""
+        return self.library.frames(self.clip_ids, self.start_time + (self.progress + 1).to(torch.float64) * self.dt)
+
+    # ------------------------------------------------------------------------------- steps
+    def after_step(self, state: SimState, ref: MotionFrames) -> dict[str, Tensor]:
+        """Advance the counters after ``sim.step``; reset finished envs. Returns per-env tensors
+        ``error`` (mean body error, m), ``terminated``, ``truncated`` and ``length`` (steps)."""
+        p = self.params
+        self.progress += 1
+        err = torch.linalg.vector_norm(state.body_pos.double() - ref.body_pos.double(), dim=-1).mean(-1)
+        failed = ~(err <= self.threshold) & (self.progress > p.termination_grace)
+        unstable = state.unstable.bool() if state.unstable.numel() else torch.zeros_like(failed)
+        terminated = failed | unstable
+        t_next = self.start_time + (self.progress + 1).to(torch.float64) * self.dt
+        clip_over = ~self._loops[self.clip_ids] & (t_next > self._durations[self.clip_ids] + 1e-6)
+        truncated = ((self.progress >= p.episode_steps) | clip_over) & ~terminated
+        done = terminated | truncated
+        length = self.progress.clone()
+        if bool(done.any()):
+            ids = done.nonzero().squeeze(-1)
+            self._record(self.clip_ids[ids].cpu(), terminated[ids].cpu())
+            self.reset_envs(ids)
+        return {"error": torch.nan_to_num(err, nan=0.0), "terminated": terminated, "truncated": truncated, "length": length}
+
+    # ---------------------------------------------------------------------- hard negatives
+    @property
+    def clip_weights(self) -> Tensor:
+        return self.library.weights.detach().to("cpu", torch.float64).clone()
+
+    def _record(self, clip_ids: Tensor, failed: Tensor) -> None:
+        ones = torch.ones_like(clip_ids, dtype=torch.float64)
+        f = failed.to(torch.float64)
+        self.episodes_per_clip.index_add_(0, clip_ids, ones.long())
+        self.failures_per_clip.index_add_(0, clip_ids, f.long())
+        self._win_episodes.index_add_(0, clip_ids, ones)
+        self._win_failures.index_add_(0, clip_ids, f)
+        self._win_total += int(clip_ids.numel())
+        if self._win_total >= self.params.update_every:
+            seen = self._win_episodes > 0
+            rate = torch.where(seen, self._win_failures / self._win_episodes.clamp_min(1.0), torch.zeros_like(self._win_failures))
+            self.add_failures(rate)
+            self._win_episodes.zero_()
+            self._win_failures.zero_()
+            self._win_total = 0
+
+    def add_failures(self, amount: Tensor) -> None:
+        """``f ← decay · f + amount`` and refresh the sampling weights (when hard negatives are on)."""
+        self.fail_counts = self.fail_counts * self.params.hard_negative_decay + amount.to(torch.float64)
+        if self.params.hard_negative:
+            self.library.set_weights(failure_weights(self.fail_counts, self.base_weights, self.params.hard_negative_floor))
+
+    # ------------------------------------------------------------------------------ resume
+    def state_dict(self) -> dict[str, Any]:
+        sd: dict[str, Any] = {
+            "num_envs": self.num_envs,
+            "clip_names": list(self.library.clip_names),
+            "generator": self.gen.get_state().clone(),
+            "clip_ids": self.clip_ids.cpu().clone(),
+            "start_time": self.start_time.cpu().clone(),
+            "progress": self.progress.cpu().clone(),
+            "fail_counts": self.fail_counts.clone(),
+            "episodes_per_clip": self.episodes_per_clip.clone(),
+            "failures_per_clip": self.failures_per_clip.clone(),
+            "win_episodes": self._win_episodes.clone(),
+            "win_failures": self._win_failures.clone(),
+            "win_total": self._win_total,
+            "weights": self.clip_weights,
+        }
+        if hasattr(self.sim, "get_physics_state"):
+            sd["physics"] = torch.from_numpy(np.array(self.sim.get_physics_state(), dtype=np.float64, copy=True))
+        else:  # any Simulator: the kinematic state it can be reset to
+            s = self.sim.state
+            sd["sim_state"] = {k: getattr(s, k).cpu().clone() for k in _HUMANOID_FIELDS}
+        return sd
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        if int(state["num_envs"]) != self.num_envs:
+            raise ValueError(f"the checkpoint has {state['num_envs']} envs, the params ask for {self.num_envs}")
+        if list(state["clip_names"]) != list(self.library.clip_names):
+            raise ValueError("the checkpoint was made with a different motion set")
+        dev = self.library.device
+        self.gen.set_state(state["generator"].clone())
+        self.clip_ids = state["clip_ids"].to(dev).clone()
+        self.start_time = state["start_time"].to(dev).clone()
+        self.progress = state["progress"].to(dev).clone()
+        self.fail_counts = state["fail_counts"].clone()
+        self.episodes_per_clip = state["episodes_per_clip"].clone()
+        self.failures_per_clip = state["failures_per_clip"].clone()
+        self._win_episodes = state["win_episodes"].clone()
+        self._win_failures = state["win_failures"].clone()
+        self._win_total = int(state["win_total"])
+        self.library.set_weights(state["weights"])
+        ids = torch.arange(self.num_envs)
+        if "physics" in state and hasattr(self.sim, "set_physics_state"):
+            self.sim.set_physics_state(ids, np.array(state["physics"].numpy(), dtype=np.float64, copy=True))
+        elif "sim_state" in state:
+            self.sim.reset(ids, HumanoidState(**{k: v.to(dev) for k, v in state["sim_state"].items()}))
+        else:
+            raise ValueError("the checkpoint has no simulator state usable by this simulator")
+
+
+# ------------------------------------------------------------------------------------ trainer
+def _stack_obs(items: list[Observations]) -> Observations:
+    """(T, N, ...) observations from T steps of (N, ...) ones (tensor extras with N rows are kept)."""
+    first = items[0]
+    goal = None if first.goal is None else torch.stack([o.goal for o in items])  # type: ignore[misc]
+    extra = {}
+    for k, v in first.extra.items():
+        if isinstance(v, Tensor) and v.dim() > 0 and v.shape[0] == first.proprio.shape[0]:
+            extra[k] = torch.stack([o.extra[k] for o in items])
+    return Observations(proprio=torch.stack([o.proprio for o in items]), goal=goal, extra=extra)
+
+
+def _columns(obs: Observations, idx: Tensor) -> Observations:
+    return Observations(
+        proprio=obs.proprio[:, idx],
+        goal=None if obs.goal is None else obs.goal[:, idx],
+        extra={k: v[:, idx] for k, v in obs.extra.items()},
+    )
+
+
+class DistillTrainer(Trainer):
+    """Distills the imitator stage into the latent stage (module docstring); resumes from ``distill.pt``."""
+
+    def __init__(self, params: DistillParams | None = None):
+        self.params = params or DistillParams()
+
+    def run(self, ctx: Any) -> StageResult:
+        p = self.params
+        if p.torch_threads is not None:
+            torch.set_num_threads(p.torch_threads)
+        device = torch.device(getattr(ctx, "device", "cpu"))
+        workdir = Path(ctx.workdir)
+        workdir.mkdir(parents=True, exist_ok=True)
+        ckpt_path = workdir / CHECKPOINT_NAME
+        spec_yaml = ctx.spec_yaml() if callable(getattr(ctx, "spec_yaml", None)) else None
+
+        torch.manual_seed(ctx.seed)
+        np.random.seed(ctx.seed % 2**32)
+        random.seed(ctx.seed)
+        skeleton = ctx.skeleton
+        upstream = ctx.upstream.get("imitator")
+        teacher: Imitator = ctx.stage_component("imitator", checkpoint=upstream.checkpoint if upstream else None)
+        student = ctx.stage_component("latent")
+        for method in ("student_action", "distill_losses"):
+            if not callable(getattr(student, method, None)) or not isinstance(student, torch.nn.Module):
+                raise ValueError(
+                    f"the latent space {type(student).__name__} cannot be distilled: it must be an nn.Module with "
+                    "student_action and distill_losses (mocap.interfaces.DistillableLatent)"
+                )
+        student.to(device)
+        motion_set = ctx.build("motions").load(skeleton)
+        for path, reason in getattr(motion_set, "skipped", []):
+            ctx.console.print(f"[yellow]skipped[/] {path}: {reason}")
+        lib = MotionLibrary(motion_set, skeleton)
+        sim = ctx.build("simulator", skeleton=skeleton, num_envs=p.num_envs, seed=ctx.seed)
+        episodes = DistillEpisodes(p, lib, sim, seed=ctx.seed)
+        eval_sims: dict[int, Simulator] = {}
+
+        def make_eval_sim(n: int) -> Simulator:
+            if n not in eval_sims:
+                eval_sims[n] = ctx.build("simulator", skeleton=skeleton, num_envs=n, seed=ctx.seed)
+            return _Borrowed(eval_sims[n])  # type: ignore[return-value]
+
+        params_list = [q for q in student.parameters() if q.requires_grad]
+        optimizer = torch.optim.Adam(params_list, lr=p.lr)
+        gen = torch.Generator().manual_seed(int(ctx.seed) + 1)  # minibatch order, mixture draws
+        window: dict[str, deque[float]] = {}
+        iteration, env_steps = 0, 0
+        last_eval: dict[str, float] = {}
+        if ckpt_path.is_file():
+            ck = load_checkpoint(ckpt_path, map_location=device)
+            if ck.get("format") != CHECKPOINT_FORMAT:
+                raise ValueError(f"{ckpt_path}: not a distill checkpoint (format {ck.get('format')!r})")
+            student.load_state_dict(ck["student"])
+            optimizer.load_state_dict(ck["optimizer"])
+            episodes.load_state_dict(ck["episodes"])
+            gen.set_state(ck["generator"])
+            iteration, env_steps = int(ck["iteration"]), int(ck["env_steps"])
+            window = {k: deque(v, maxlen=EPISODE_WINDOW) for k, v in ck["episode_window"].items()}
+            last_eval = dict(ck.get("last_eval", {}))
+            _set_rng_state(ck["rng"])
+            ctx.log.truncate_after(iteration)
+            ctx.console.print(f"distill: resuming at iteration {iteration} ({env_steps:,} env steps)")
+        else:
+            ctx.log.truncate_after(0)
+            init = getattr(student, "init_from_teacher", None)
+            if callable(init):
+                init(teacher)
+            episodes.reset_all()
+        self._check_dims(teacher, student, episodes, device)
+
+        def save(final: bool = False) -> None:
+            save_checkpoint(
+                ckpt_path,
+                {
+                    "format": CHECKPOINT_FORMAT,
+                    "iteration": iteration,
+                    "env_steps": env_steps,
+                    "student": {k: v.detach().cpu() if isinstance(v, Tensor) else v for k, v in student.state_dict().items()},
+                    "latent_config": getattr(student, "config", None),
+                    "optimizer": optimizer.state_dict(),
+                    "episodes": episodes.state_dict(),
+                    "generator": gen.get_state(),
+                    "rng": _rng_state(),
+                    "episode_window": {k: list(v) for k, v in window.items()},
+                    "last_eval": last_eval,
+                    "params": p.model_dump(mode="json"),
+                    "finished": final,
+                },
+                spec_yaml=spec_yaml,
+            )
+
+        total = p.iterations
+        budget = total * p.batch_size
+        progress_bar = _Progress(ctx.console, total, p.print_every)
+        last_stats: dict[str, float] = {}
+        t_start = time.perf_counter()
+        steps_at_start = env_steps
+        try:
+            while iteration < total:
+                progress = min(1.0, env_steps / budget)
+                t0 = time.perf_counter()
+                chunk, teacher_out, starts, roll = self._rollout(teacher, student, episodes, sim, gen, progress, device, window)
+                env_steps += p.batch_size
+                t_rollout = time.perf_counter() - t0
+
+                t1 = time.perf_counter()
+                stats = self._update(student, optimizer, params_list, chunk, teacher_out, starts, gen, progress)
+                t_update = time.perf_counter() - t1
+                iteration += 1
+
+                elapsed = time.perf_counter() - t_start
+                log = {
+                    "env_steps": float(env_steps),
+                    "progress": progress,
+                    **stats,
+                    **roll,
+                    "lr": optimizer.param_groups[0]["lr"],
+                    "time/rollout_s": t_rollout,
+                    "time/update_s": t_update,
+                    "steps_per_s": p.batch_size / max(t_rollout + t_update, 1e-9),
+                    "steps_per_s_run": (env_steps - steps_at_start) / max(elapsed, 1e-9),
+                }
+                for key, vals in window.items():
+                    if vals:
+                        log[f"episode/{key}"] = float(np.mean(vals))
+                w = episodes.clip_weights
+                log["hard_negative/max_weight"], log["hard_negative/min_weight"] = float(w.max()), float(w.min())
+                if p.eval_every > 0 and (iteration % p.eval_every == 0 or iteration >= total):
+                    t2 = time.perf_counter()
+                    last_eval = self._evaluate(teacher, student, lib, episodes, make_eval_sim, device)
+                    log.update(last_eval)
+                    log["time/eval_s"] = time.perf_counter() - t2
+                ctx.log.log(iteration, **log)
+                last_stats = log
+                progress_bar.update(iteration, env_steps, log)
+
+                stop = ctx.should_stop()
+                if stop or iteration % p.checkpoint_every == 0 or iteration >= total:
+                    save(final=iteration >= total)
+                if stop:
+                    ctx.console.print(f"distill: stopped at iteration {iteration}; checkpoint {ckpt_path}")
+                    return StageResult(checkpoint=ckpt_path, metrics=_summary(last_stats, last_eval, iteration, env_steps))
+        finally:
+            progress_bar.close()
+            sim.close()
+            for s in eval_sims.values():
+                s.close()
+
+        metrics = _summary(last_stats, last_eval, iteration, env_steps)
+        latent_path = workdir / LATENT_NAME
+        save_latent(latent_path, student, extra={"trainer": "distill", "metrics": metrics}, spec_yaml=spec_yaml)
+        return StageResult(checkpoint=latent_path, metrics=metrics)
+
+    # ------------------------------------------------------------------------------ pieces
+    @staticmethod
+    def _check_dims(teacher: Imitator, student: Any, episodes: DistillEpisodes, device: torch.device) -> None:
+        """Fail early, with both sizes named, when the student's output cannot match the teacher's."""
+        obs = teacher.observe(episodes.sim.state, episodes.reference_next())
+        with torch.no_grad():
+            t_out = teacher.policy_output(obs, deterministic=True)
+            try:
+                s_out = student.student_action(observations_to(obs, device), sample=False)
+            except (ValueError, RuntimeError) as exc:
+                goal = None if obs.goal is None else obs.goal.shape[-1]
+                raise ValueError(
+                    f"the latent space cannot read the teacher's observation (proprio {obs.proprio.shape[-1]}, goal {goal} dims): {exc}"
+                ) from exc
+        if tuple(s_out.shape) != tuple(t_out.shape):
+            raise ValueError(
+                f"the latent space outputs {tuple(s_out.shape)}, the teacher's policy output is {tuple(t_out.shape)}: "
+                "set the latent's action size to the teacher's"
+            )
+
+    def _rollout(
+        self,
+        teacher: Imitator,
+        student: Any,
+        episodes: DistillEpisodes,
+        sim: Simulator,
+        gen: torch.Generator,
+        progress: float,
+        device: torch.device,
+        window: dict[str, deque[float]],
+    ) -> tuple[Observations, Tensor, Tensor, dict[str, float]]:
+        p = self.params
+        T, N = p.horizon, p.num_envs
+        beta = mixture_beta(progress, p.mixture_beta[0], p.mixture_beta[1], p.mixture_anneal_end) if p.act_with == "mixture" else None
+        obs_list: list[Observations] = []
+        outs = torch.zeros(T, N, 0)
+        starts = torch.zeros(T, N, dtype=torch.bool)
+        err_sum, gap_sum, teacher_acts = 0.0, 0.0, 0.0
+        student.eval()
+        state = sim.state
+        with torch.no_grad():
+            for t in range(T):
+                ref = episodes.reference_next()
+                obs = teacher.observe(state, ref)
+                t_out = teacher.policy_output(obs, deterministic=True)
+                if t == 0:
+                    outs = torch.zeros(T, N, t_out.shape[-1], dtype=t_out.dtype)
+                outs[t] = t_out.cpu()
+                starts[t] = (episodes.progress == 0).cpu()
+                obs_list.append(observations_to(obs, "cpu"))
+                if p.act_with == "teacher":
+                    acting = t_out
+                else:
+                    s_out = student.student_action(observations_to(obs, device), sample=p.sample_latent).to(t_out)
+                    gap_sum += float((s_out - t_out).square().sum(-1).mean())
+                    if beta is not None:
+                        use_teacher = torch.rand(N, generator=gen) < beta
+                        teacher_acts += float(use_teacher.double().mean())
+                        acting = torch.where(use_teacher.to(t_out.device)[:, None], t_out, s_out)
+                    else:
+                        acting = s_out
+                state = sim.step(teacher.to_pd_targets(obs, acting))
+                res = episodes.after_step(state, ref)
+                err_sum += float(res["error"].mean())
+                done = res["terminated"] | res["truncated"]
+                if bool(done.any()):
+                    ids = done.nonzero().squeeze(-1)
+                    for key, val in (
+                        ("length", res["length"][ids].double()),
+                        ("success", res["truncated"][ids].double()),
+                    ):
+                        window.setdefault(key, deque(maxlen=EPISODE_WINDOW)).extend(val.cpu().tolist())
+                    state = sim.state  # after the resets
+        roll = {"rollout/body_error_m": err_sum / T}
+        if p.act_with != "teacher":
+            roll["rollout/action_gap"] = gap_sum / T
+        if beta is not None:
+            roll["rollout/mixture_beta"] = beta
+            roll["rollout/teacher_fraction"] = teacher_acts / T
+        chunk = observations_to(_stack_obs(obs_list), device)
+        return chunk, outs.to(device), starts.to(device), roll
+
+    def _update(
+        self,
+        student: Any,
+        optimizer: torch.optim.Optimizer,
+        params: list[torch.nn.Parameter],
+        chunk: Observations,
+        teacher_out: Tensor,
+        starts: Tensor,
+        gen: torch.Generator,
+        progress: float,
+    ) -> dict[str, float]:
+        p = self.params
+        N = teacher_out.shape[1]
+        update_norm = getattr(student, "update_normalizers", None)
+        if callable(update_norm):
+            update_norm(chunk)
+        student.train()
+        sums: dict[str, float] = {}
+        steps = 0
+        for _ in range(p.epochs):
+            perm = torch.randperm(N, generator=gen)
+            for idx in perm.split(p.minibatch_envs):
+                idx = idx.to(teacher_out.device)
+                losses = student.distill_losses(_columns(chunk, idx), teacher_out[:, idx], starts[:, idx], progress)
+                loss = losses["loss"]
+                optimizer.zero_grad(set_to_none=True)
+                loss.backward()
+                grad_norm = torch.nn.utils.clip_grad_norm_(params, p.max_grad_norm or math.inf)
+                optimizer.step()
+                for key, val in losses.items():
+                    name = "loss/total" if key == "loss" else f"loss/{key}"
+                    sums[name] = sums.get(name, 0.0) + float(torch.as_tensor(val).detach())
+                sums["grad_norm"] = sums.get("grad_norm", 0.0) + float(grad_norm)
+                steps += 1
+        student.eval()
+        return {k: v / max(steps, 1) for k, v in sums.items()}
+
+    def _evaluate(
+        self,
+        teacher: Imitator,
+        student: Any,
+        lib: MotionLibrary,
+        episodes: DistillEpisodes,
+        make_sim: Callable[[int], Simulator],
+        device: torch.device,
+    ) -> dict[str, float]:
+        """The student as an imitator on every clip (z = encoder mean); failed clips add 1 to their counts."""
+        from mocap.evaluation import ImitationEvalParams, evaluate_imitator
+
+        p = self.params
+        student.eval()
+        horizon = p.eval_horizon if p.eval_horizon is not None else p.episode_steps * episodes.dt
+        params = ImitationEvalParams(num_envs=p.eval_num_envs, horizon=horizon, threshold=p.termination_threshold, video=False)
+        table = evaluate_imitator(LatentImitator(teacher, student, device), lib, make_sim, params)
+        failed = torch.tensor([not table["clips"][name]["success"] for name in lib.clip_names], dtype=torch.float64)
+        episodes.add_failures(failed)
+        out = {f"eval/{k}": float(v) for k, v in table["aggregate"].items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
+        return out
+
+
+class _Borrowed:
+    """A cached evaluation simulator lent to ``evaluate_imitator`` (which closes what it gets)."""
+
+    def __init__(self, sim: Simulator):
+        self._sim = sim
+
+    def close(self) -> None:
+        pass
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._sim, name)
+
+
+def _summary(stats: dict[str, float], last_eval: dict[str, float], iteration: int, env_steps: int) -> dict[str, float]:
+    out = {"iterations": float(iteration), "env_steps": float(env_steps)}
+    for key, value in stats.items():
+        if key.startswith(("episode/", "loss/")) or key in ("steps_per_s_run", "rollout/action_gap"):
+            out[key] = float(value)
+    out.update({k: float(v) for k, v in last_eval.items()})
+    return out
+
+
+class _Progress:
+    """A live rich progress bar on a terminal; a plain line every ``every`` iterations otherwise."""
+
+    def __init__(self, console: Any, total: int, every: int):
+        self.console = console
+        self.total = total
+        self.every = every
+        self.bar: Any = None
+        self.task: Any = None
+        if console is not None and getattr(console, "is_terminal", False):
+            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+            self.bar = Progress(
+                TextColumn("[bold]distill[/]"),
+                BarColumn(),
+                MofNCompleteColumn(),
+                TimeRemainingColumn(),
+                TextColumn("{task.description}"),
+                console=console,
+            )
+            self.task = self.bar.add_task("", total=total)
+            self.bar.start()
+
+    @staticmethod
+    def line(iteration: int, env_steps: int, s: dict[str, float]) -> str:
+        parts = [f"it {iteration}", f"{env_steps:,} steps", f"{s.get('steps_per_s', 0.0):,.0f} steps/s"]
+        if "loss/action" in s:
+            parts.append(f"action {s['loss/action']:.4g}")
+        if "loss/kl" in s:
+            parts.append(f"kl {s['loss/kl']:.3g}")
+        if "episode/length" in s:
+            parts.append(f"len {s['episode/length']:.1f}")
+        if "eval/success_rate" in s:
+            parts.append(f"eval success {s['eval/success_rate']:.2f}")
+        return " | ".join(parts)
+
+    def update(self, iteration: int, env_steps: int, stats: dict[str, float]) -> None:
+        text = self.line(iteration, env_steps, stats)
+        if self.bar is not None:
+            self.bar.update(self.task, completed=iteration, description=text)
+        elif self.console is not None and (iteration % self.every == 0 or iteration == self.total):
+            self.console.print(f"distill: {text}")
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.stop()
+            self.bar = None
+
+
+# ---------------------------------------------------------------------------------- plugin hook
+@hookimpl
+def register_trainers(register):  # type: ignore[no-untyped-def]
+    register(
+        "distill",
+        DistillTrainer,
+        params=DistillParams,
+        description="DAgger-style online distillation of the imitator into a DistillableLatent (student acts, teacher "
+        "labels); hard-negative clips, periodic evaluation, exact resume; writes latent.pt",
+    )
+
+
+__all__ = [
+    "DistillEpisodes",
+    "DistillParams",
+    "DistillTrainer",
+    "failure_weights",
+    "load_latent_state",
+    "mixture_beta",
+    "save_latent",
+]
