@@ -90,6 +90,12 @@ class DistillParams(BaseModel):
         16, ge=1, description="env columns per minibatch; each keeps its horizon steps in time order (minibatch = this × horizon samples)"
     )
     lr: float = Field(5e-4, gt=0, description="Adam learning rate ([P] 5e-4)")
+    label: Literal["policy_output", "pd_targets"] = Field(
+        "policy_output",
+        description="what the student learns: the teacher's raw policy output ([P]/[CODE]: PHC's normalized absolute "
+        "action) or its PD targets in rad. Use 'pd_targets' with a teacher whose output needs the reference to become "
+        "PD targets (PHC `action: residual`): tasks have no reference, so a decoder must produce targets on its own",
+    )
     max_grad_norm: float | None = Field(50.0, gt=0, description="global gradient-norm clip; None = off ([CODE] 50)")
     act_with: Literal["student", "teacher", "mixture"] = Field(
         "student",
@@ -165,6 +171,29 @@ def mixture_beta(progress: float, start: float, end: float, anneal_end: float) -
 
 
 # ------------------------------------------------------------------------------ latent files
+class PDTargetTeacher(Imitator):
+    """A teacher whose "policy output" is its PD targets (and whose mapping is the identity).
+
+    With it, a student learns PD targets directly, so its decoder drives the simulator without the
+    reference motion (the ``label: pd_targets`` switch of :class:`DistillParams`).
+    """
+
+    def __init__(self, imitator: Imitator):
+        self.imitator = imitator
+
+    def observe(self, state: Any, reference: Any) -> Any:
+        return self.imitator.observe(state, reference)
+
+    def act(self, obs: Any, deterministic: bool = True) -> Tensor:
+        return self.imitator.act(obs, deterministic)
+
+    def policy_output(self, obs: Any, deterministic: bool = True) -> Tensor:
+        return self.imitator.act(obs, deterministic)
+
+    def to_pd_targets(self, obs: Any, output: Tensor) -> Tensor:
+        return output
+
+
 def save_latent(path: Path, latent: torch.nn.Module, extra: dict[str, Any] | None = None, *, spec_yaml: str | None = None) -> None:
     """Write a trained latent space (``config`` if it has one, weights, buffers) atomically to ``path``."""
     state = {k: v.detach().cpu() if isinstance(v, Tensor) else v for k, v in latent.state_dict().items()}
@@ -406,6 +435,8 @@ class DistillTrainer(Trainer):
         skeleton = ctx.skeleton
         upstream = ctx.upstream.get("imitator")
         teacher: Imitator = ctx.stage_component("imitator", checkpoint=upstream.checkpoint if upstream else None)
+        if p.label == "pd_targets":
+            teacher = PDTargetTeacher(teacher)
         student = ctx.stage_component("latent")
         for method in ("student_action", "distill_losses"):
             if not callable(getattr(student, method, None)) or not isinstance(student, torch.nn.Module):
@@ -535,7 +566,7 @@ class DistillTrainer(Trainer):
 
         metrics = _summary(last_stats, last_eval, iteration, env_steps)
         latent_path = workdir / LATENT_NAME
-        save_latent(latent_path, student, extra={"trainer": "distill", "metrics": metrics}, spec_yaml=spec_yaml)
+        save_latent(latent_path, student, extra={"trainer": "distill", "metrics": metrics, "label": p.label}, spec_yaml=spec_yaml)
         return StageResult(checkpoint=latent_path, metrics=metrics)
 
     # ------------------------------------------------------------------------------ pieces

@@ -277,3 +277,28 @@ latent:
     assert isinstance(latent, PulseLatent) and latent.latent_dim == 4
     steps = [json.loads(line)["step"] for line in (tmp_path / "run" / "metrics.jsonl").read_text().splitlines()]
     assert steps == [1, 2]
+
+
+def test_pd_target_labels_make_the_student_independent_of_the_reference(amp, walk, teacher_file, tmp_path):
+    """``label: pd_targets``: the student learns the teacher's PD targets and steps the simulator
+    with its own output, no reference-dependent mapping (what tasks need from a residual teacher)."""
+    from mocap.distill import PDTargetTeacher
+
+    ctx = FakeContext(tmp_path, amp, walk, teacher_file)
+    teacher = ctx.stage_component("imitator", checkpoint=teacher_file)
+    wrapped = PDTargetTeacher(teacher)
+    from mocap.motion.library import MotionLibrary
+    from mocap.plugins import get_plugins
+
+    lib = MotionLibrary(walk, amp)
+    sim = get_plugins().get("simulator", "mujoco").build({}, skeleton=amp, num_envs=2, seed=0)
+    sim.reset(torch.arange(2), lib.frames(torch.zeros(2, dtype=torch.long), torch.zeros(2)))
+    obs = wrapped.observe(sim.state, lib.frames(torch.zeros(2, dtype=torch.long), torch.full((2,), 1 / 30)))
+    out = wrapped.policy_output(obs)
+    assert torch.equal(out, teacher.act(obs)) and torch.equal(wrapped.to_pd_targets(obs, out), out)
+    assert not torch.allclose(out, teacher.policy_output(obs))  # residual teacher: raw output != PD targets
+    sim.close()
+    params = DistillParams(num_envs=4, horizon=8, total_env_steps=4 * 8 * 3, epochs=2, minibatch_envs=2, label="pd_targets", eval_every=0)
+    result = run(ctx, params)
+    assert load_latent_state(result.checkpoint)["extra"]["label"] == "pd_targets"
+    assert all(r["loss/action"] >= 0 for r in records(tmp_path))
