@@ -97,7 +97,7 @@ def cmd_run(
         raise typer.Exit(EXIT_INTERRUPTED) from None
     console.print(f"[bold green]done[/]: {len(records)} stage(s); report: {out_dir / 'report.md'}", highlight=False)
     if resolved.spec.imitator is not None:
-        console.print(f"next: `mocap eval {out_dir}` for the per-clip imitation table; `mocap validate --help` and specs/ for other specs", highlight=False)
+        console.print(f"next: `mocap eval {out_dir}` prints the per-clip imitation table; more specs to run are in specs/", highlight=False)
 
 
 def cmd_schema(
