@@ -509,3 +509,22 @@ task:
     assert isinstance(load_policy(record.result.checkpoint), ActorCritic)
     steps = [json.loads(line)["step"] for line in (tmp_path / "run" / "metrics.jsonl").read_text().splitlines()]
     assert steps == [1, 2, 3]
+
+
+def test_export_policy_from_a_training_checkpoint(tmp_path):
+    """``export_policy`` turns a resumable trainer checkpoint into a policy file with the same weights."""
+    from mocap.checkpoint import load_checkpoint, save_checkpoint
+    from mocap.rl.networks import ActorCritic, export_policy, load_policy
+
+    model = ActorCritic(5, Box((2,)), [8], [8])
+    save_checkpoint(
+        tmp_path / "ppo.pt",
+        {"model": model.state_dict(), "policy_config": model.config, "optimizer": {}, "iteration": 7, "env_steps": 700},
+        spec_yaml="name: x\n",
+    )
+    export_policy(tmp_path / "ppo.pt", tmp_path / "policy.pt")
+    again = load_policy(tmp_path / "policy.pt")
+    pairs = [(a, b) for a, b in zip(model.state_dict().values(), again.state_dict().values()) if isinstance(a, torch.Tensor)]
+    assert pairs and all(torch.equal(a, b) for a, b in pairs)
+    data = load_checkpoint(tmp_path / "policy.pt")
+    assert data["extra"] == {"iteration": 7, "env_steps": 700} and data["spec"] == "name: x\n" and "optimizer" not in data

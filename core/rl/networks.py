@@ -287,4 +287,14 @@ def load_policy(path: Path, map_location: str | torch.device = "cpu") -> ActorCr
     return model.to(map_location).eval()
 
 
-__all__ = ["ACTIVATIONS", "ActorCritic", "TrainOutput", "load_policy", "mlp", "save_policy"]
+def export_policy(source: Path, destination: Path, extra: dict[str, Any] | None = None) -> None:
+    """Write the policy inside ``source`` (a policy file or a trainer's resumable checkpoint such as
+    ``ppo.pt``) as a self-contained policy file: network config, weights, normalizers and the spec
+    that trained it — without the optimizer and rollout state (a few MB instead of ~3x that)."""
+    data = load_checkpoint(Path(source))
+    model = load_policy(Path(source))
+    info = {k: data[k] for k in ("iteration", "env_steps") if k in data}
+    save_policy(Path(destination), model, extra={**info, **(extra or {})}, spec_yaml=data.get("spec"))
+
+
+__all__ = ["ACTIVATIONS", "ActorCritic", "TrainOutput", "export_policy", "load_policy", "mlp", "save_policy"]
