@@ -32,9 +32,10 @@ class UserError(Exception):
 def user_errors() -> tuple[type[BaseException], ...]:
     """Exception types that are the user's input, not a bug (printed without a traceback)."""
     from mocap.motion.clip import MotionDataError
+    from mocap.pipeline import StageFailed
     from mocap.spec import SpecError
 
-    return (UserError, SpecError, PluginError, MotionDataError)
+    return (UserError, SpecError, PluginError, MotionDataError, StageFailed)
 
 
 def fail(message: str, code: int = EXIT_USER_ERROR) -> "typer.Exit":

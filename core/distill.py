@@ -65,6 +65,7 @@ from torch import Tensor
 from mocap.checkpoint import load_checkpoint, save_checkpoint
 from mocap.hooks import hookimpl
 from mocap.interfaces import Imitator, Simulator, StageResult, Trainer
+from mocap.pipeline import StageFailed
 from mocap.latent_imitator import LatentImitator, observations_to
 from mocap.motion.library import MotionLibrary
 from mocap.state import HumanoidState, MotionFrames, Observations, SimState
@@ -171,6 +172,10 @@ def mixture_beta(progress: float, start: float, end: float, anneal_end: float) -
 
 
 # ------------------------------------------------------------------------------ latent files
+class DistillError(StageFailed):
+    """A spec that cannot be distilled (shown to the user without a traceback)."""
+
+
 class PDTargetTeacher(Imitator):
     """A teacher whose "policy output" is its PD targets (and whose mapping is the identity).
 
@@ -434,7 +439,12 @@ class DistillTrainer(Trainer):
         random.seed(ctx.seed)
         skeleton = ctx.skeleton
         upstream = ctx.upstream.get("imitator")
-        teacher: Imitator = ctx.stage_component("imitator", checkpoint=upstream.checkpoint if upstream else None)
+        try:
+            teacher: Imitator = ctx.stage_component("imitator", checkpoint=upstream.checkpoint if upstream else None)
+        except KeyError:
+            raise DistillError(
+                "the distill trainer needs a teacher: add an `imitator:` section (a trained imitator or its checkpoint) to the spec"
+            ) from None
         if p.label == "pd_targets":
             teacher = PDTargetTeacher(teacher)
         student = ctx.stage_component("latent")

@@ -368,8 +368,6 @@ def validate_document(
             model = resolve_relative_paths(model, base_dir)
         resolved[path] = model
         ref.params = model.model_dump(mode="json") if model is not None else {}
-    if spec.latent is not None and spec.imitator is None and spec.latent.checkpoint is None:
-        issues.append(SpecIssue("latent", "a latent stage distills from an imitator: add an `imitator:` section"))
     if issues:
         raise SpecError(source, issues)
     return ResolvedSpec(spec=spec, source=source, params=resolved)

@@ -302,3 +302,16 @@ def test_pd_target_labels_make_the_student_independent_of_the_reference(amp, wal
     result = run(ctx, params)
     assert load_latent_state(result.checkpoint)["extra"]["label"] == "pd_targets"
     assert all(r["loss/action"] >= 0 for r in records(tmp_path))
+
+
+def test_distill_without_an_imitator_is_a_clear_error(tmp_path):
+    from mocap.testing import invoke
+
+    spec = tmp_path / "s.yaml"
+    spec.write_text(
+        "spec_version: 1\nname: no-teacher\nmotions: {name: deepmimic, params: {clips: [walk]}}\n"
+        "latent: {name: pulse, trainer: {name: distill}}\n"
+    )
+    result = invoke(["run", spec, "--out", tmp_path / "runs" / "x"])
+    assert result.exit_code == 2 and "Traceback" not in result.output
+    assert "needs a teacher" in result.stderr

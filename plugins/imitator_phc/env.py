@@ -38,6 +38,22 @@ play so that mastered clips are not forgotten. ``f`` grows from two sources; bef
   trainer calls it through :meth:`ImitationEnv.after_iteration` every ``eval_every`` iterations.
   Failure there is the project evaluator's criterion (:func:`mocap.evaluation.rollout_imitation`:
   mean body error above ``eval_threshold`` = 0.5 m at any frame, or instability).
+
+**AMP reward** (PHC+; ``params.amp``, :mod:`mocap_phc.amp`): every env keeps the last
+``amp_history`` AMP frames (newest first). After each physics step the new state's frame is pushed
+and the step's reward becomes::
+
+    r = w_task r^g + w_amp r^amp + r^energy          (amp_energy_mix "paper", Eq. 1)
+    r = w_task (r^g + r^energy) + w_amp r^amp        (amp_energy_mix "code")
+
+with ``r^amp`` from the discriminator as it stood during the rollout; the window is also handed to
+the discriminator trainer as a policy sample. At an episode start (RSI reset) the window is filled
+with the simulator's reset state as the newest frame and the reference clip's frames at
+``t0 - k dt`` (``k = 1 .. history - 1``, clamped to the clip's first frame for non-looping clips)
+as the older ones, i.e. the motion the humanoid is pretended to have come from (the code's
+``_init_amp_obs_ref``). :meth:`ImitationEnv.after_iteration` trains the discriminator on the last
+rollout's windows (``amp_updates_per_iteration`` steps of ``amp_batch``); the discriminator, its
+optimizer, buffers and generator, and the windows are part of :meth:`ImitationEnv.state_dict`.
 """
 
 from __future__ import annotations
@@ -57,6 +73,7 @@ from mocap.observations import imitation_goal, imitation_goal_dim, proprioceptio
 from mocap.rl.env import StepResult
 from mocap.skeleton import Skeleton
 from mocap.state import HumanoidState, MotionFrames, Observations, SimState
+from mocap_phc.amp import AMPHistory, AMPObservation, DiscriminatorTrainer, demo_windows, loss_config, window_frames
 from mocap_phc.rewards import ImitationReward, energy_penalty
 from mocap_phc.termination import Termination
 
@@ -273,6 +290,30 @@ class ImitationEnv:
         self._obs: Tensor | None = None
         self.last_evaluation: dict[str, Any] | None = None
 
+        self.amp_obs: AMPObservation | None = None
+        self.amp_history: AMPHistory | None = None
+        self.amp_trainer: DiscriminatorTrainer | None = None
+        if p.amp:
+            self.amp_obs = AMPObservation(skeleton, p.amp_joints, "tan_norm", p.amp_key_bodies)
+            H = int(p.amp_history)
+            self.amp_history = AMPHistory(N, H, self.amp_obs.dim)
+            amp_obs, dt = self.amp_obs, self.dt
+
+            def demo_fn(n: int, gen: torch.Generator) -> Tensor:
+                return demo_windows(lib, amp_obs, n, H, dt, gen).reshape(n, -1)
+
+            self.amp_trainer = DiscriminatorTrainer(
+                H * self.amp_obs.dim,
+                demo_fn,
+                loss_config(p.amp_loss, p.amp_grad_penalty, p.amp_reward_scale),
+                hidden=tuple(p.amp_hidden),
+                lr=p.amp_lr,
+                replay_size=p.amp_replay_size,
+                replay_keep_prob=p.amp_replay_keep_prob,
+                demo_buffer_size=p.amp_demo_buffer_size,
+                seed=int(seed) + 7919,
+            )
+
     # ----------------------------------------------------------------------------- helpers
     def _ref_at(self, ids: Tensor | None, steps_ahead: int) -> MotionFrames:
         c = self.clip_ids if ids is None else self.clip_ids[ids]
@@ -307,6 +348,18 @@ class ImitationEnv:
         self.progress[ids] = 0
         self.ep_return[ids] = 0.0
         self.sim.reset(ids, self.library.frames(clips, t0))
+        if self.amp_history is not None:
+            self._amp_fill(ids, self.sim.state.index(ids), clips, t0)
+
+    def _amp_fill(self, ids: Tensor, state: HumanoidState, clips: Tensor, t0: Tensor) -> None:
+        """Episode-start AMP window of envs ``ids``: ``state`` newest, the reference before ``t0`` older."""
+        assert self.amp_obs is not None and self.amp_history is not None
+        H = self.amp_history.history
+        now = self.amp_obs(state)[:, None]
+        if H > 1:
+            past = window_frames(self.library, self.amp_obs, clips, t0, H, self.dt, first=1)
+            now = torch.cat((now, past.to(now)), dim=1)
+        self.amp_history.fill(ids, now)
 
     # ---------------------------------------------------------------------------- VecEnv
     def reset(self) -> Tensor:
@@ -330,7 +383,22 @@ class ImitationEnv:
 
         r_im, terms = self.reward_fn(state, ref)
         energy = energy_penalty(state.dof_force, state.dof_vel, p.energy_form, p.energy_coef, self.progress)
-        reward = (r_im + energy).double()
+        amp_info: dict[str, Tensor] = {}
+        if self.amp_trainer is not None:
+            assert self.amp_obs is not None and self.amp_history is not None
+            self.amp_history.push(self.amp_obs(state))
+            window = self.amp_history.flat()
+            r_amp = self.amp_trainer.reward(window).to(r_im.device, r_im.dtype)
+            self.amp_trainer.observe_policy(window)
+            if p.amp_energy_mix == "code":
+                r_task = r_im + energy
+                reward = (p.task_reward_weight * r_task + p.amp_reward_weight * r_amp).double()
+            else:
+                r_task = r_im
+                reward = (p.task_reward_weight * r_im + p.amp_reward_weight * r_amp + energy).double()
+            amp_info = {"reward/amp": r_amp, "reward/task": r_task}
+        else:
+            reward = (r_im + energy).double()
         terminated, parts = self.termination(state, ref, self.progress)
         reward = torch.where(parts["unstable"] | ~torch.isfinite(reward), torch.zeros_like(reward), reward)
         t_next = self.start_time + (self.progress + 1).to(torch.float64) * self.dt
@@ -359,6 +427,7 @@ class ImitationEnv:
             "reward/imitation": r_im,
             **{f"reward/{k}": v for k, v in terms.items()},
             "reward/energy": energy,
+            **amp_info,
             "error/body_pos_m": torch.nan_to_num(err, nan=0.0),
             "terminated/tracking": parts["tracking"].float(),
             "terminated/fall": parts["fall"].float(),
@@ -476,17 +545,24 @@ class ImitationEnv:
     def after_iteration(self, iteration: int, policy_fn: PolicyFn) -> dict[str, float]:
         """Trainer hook: every ``eval_every`` iterations run :meth:`evaluate_clips` (which refreshes the
         sampling weights when ``hard_negative`` is on); returns scalars to log (empty otherwise)."""
+        out: dict[str, float] = {}
+        if self.amp_trainer is not None:  # the discriminator learns from the rollout just collected
+            stats = self.amp_trainer.update(self.params.amp_updates_per_iteration, self.params.amp_batch)
+            out.update({f"amp/{k}": v for k, v in stats.items()})
         every = self.params.eval_every
         if every <= 0 or iteration <= 0 or iteration % every != 0 or self._eval_factory is None:
-            return {}
+            return out
         res = self.evaluate_clips(policy_fn)
         w = self.clip_weights
-        return {
-            "hard_negative/eval_success_rate": res["success_rate"],
-            "hard_negative/failed_clips": float(len(res["failed"])),
-            "hard_negative/max_weight": float(w.max()),
-            "hard_negative/min_weight": float(w.min()),
-        }
+        out.update(
+            {
+                "hard_negative/eval_success_rate": res["success_rate"],
+                "hard_negative/failed_clips": float(len(res["failed"])),
+                "hard_negative/max_weight": float(w.max()),
+                "hard_negative/min_weight": float(w.min()),
+            }
+        )
+        return out
 
     # -------------------------------------------------------------------------- resume
     def state_dict(self) -> dict[str, Any]:
@@ -510,6 +586,9 @@ class ImitationEnv:
             "win_total": self._win_total,
             "weights": self.clip_weights,
         }
+        if self.amp_trainer is not None:
+            assert self.amp_history is not None
+            sd["amp"] = {"history": self.amp_history.buf.clone(), "trainer": self.amp_trainer.state_dict()}
         if hasattr(self.sim, "get_physics_state"):
             sd["physics"] = torch.from_numpy(np.array(self.sim.get_physics_state(), dtype=np.float64, copy=True))
         else:  # any Simulator: the kinematic state it can be reset to
@@ -537,6 +616,14 @@ class ImitationEnv:
         self._win_failures = state["win_failures"].clone()
         self._win_total = int(state["win_total"])
         self.library.set_weights(state["weights"])
+        if self.amp_trainer is not None:
+            assert self.amp_history is not None
+            if "amp" not in state:
+                raise ValueError("the saved env state has no AMP discriminator state, but params.amp is on")
+            if tuple(state["amp"]["history"].shape) != tuple(self.amp_history.buf.shape):
+                raise ValueError("the saved AMP history has a different shape (history length or features)")
+            self.amp_history.buf = state["amp"]["history"].clone()
+            self.amp_trainer.load_state_dict(state["amp"]["trainer"])
         ids = torch.arange(self.num_envs)
         if "physics" in state and hasattr(self.sim, "set_physics_state"):
             phys = state["physics"]

@@ -109,6 +109,46 @@ class PHCParams(BaseModel):
     eval_num_envs: int = Field(64, ge=1, description="clips evaluated in parallel by evaluate_clips")
     eval_threshold: float = Field(0.5, gt=0.0, description="evaluate_clips failure: mean body error above this, m ([P]/[C] evaluation 0.5)")
 
+    # -------------------------------------------------------------------- AMP (PHC+ style reward)
+    amp: bool = Field(
+        False,
+        description="add the AMP discriminator reward r = w_task r_task + w_amp r_amp ([P] PHC Eq. 1 / PULSE Eq. 5); "
+        "off until PHC+ training is run (mocap_phc.amp)",
+    )
+    amp_loss: Literal["lsgan", "bce"] = Field(
+        "lsgan",
+        description="discriminator objective: 'lsgan' = AMP paper least squares, GP w/2 with w = 10, reward max(0, 1 - (D-1)^2/4) "
+        "([P] 'same as AMP') or 'bce' = BCE on logits, GP 5, logit reg 0.01, weight decay 1e-4, coef 5, reward "
+        "-2 log(max(1 - sigmoid(D), 1e-4)) ([C])",
+    )
+    amp_history: int = Field(10, ge=1, description="AMP observation frames per discriminator input ([P]/[C] 10)")
+    amp_hidden: list[int] = Field(default_factory=lambda: [1024, 512], description="discriminator ReLU MLP widths ([C] [1024, 512])")
+    amp_joints: Literal["rot6d", "dof"] = Field(
+        "rot6d", description="AMP joint features: local rotations as tan-norm 6-D ([C]) or hinge angles (compact for hinge skeletons)"
+    )
+    amp_key_bodies: list[str] | None = Field(
+        None, description="bodies whose root-relative positions enter the AMP observation; None: the skeleton's end effectors ([C] ankles + wrists)"
+    )
+    amp_lr: float = Field(
+        2e-5, gt=0.0, description="discriminator Adam learning rate ([C] it shares the policy optimizer, PHC+ lr 2e-5; small CPU runs want ~1e-4)"
+    )
+    amp_batch: int = Field(512, ge=2, description="demo and policy windows per discriminator step ([C] amp_batch_size 512)")
+    amp_updates_per_iteration: int = Field(
+        5, ge=0, description="discriminator steps per PPO iteration ([C]: one per PPO minibatch step; [I] 5)"
+    )
+    amp_grad_penalty: float | None = Field(None, ge=0.0, description="None: 10 for lsgan (applied as w/2) and 5 for bce")
+    amp_reward_scale: float | None = Field(None, gt=0.0, description="None: 1 for lsgan, 2 for bce ([C] disc_reward_scale)")
+    task_reward_weight: float = Field(0.5, ge=0.0, description="w_task ([P]/[C] 0.5)")
+    amp_reward_weight: float = Field(0.5, ge=0.0, description="w_amp ([P]/[C] 0.5)")
+    amp_energy_mix: Literal["paper", "code"] = Field(
+        "paper",
+        description="where the energy penalty goes when amp is on: 'paper' = r = w_task r^g + w_amp r^amp + r^energy (Eq. 1) or "
+        "'code' = w_task (r^g + r^energy) + w_amp r^amp (the code adds it to the task reward)",
+    )
+    amp_replay_size: int = Field(200_000, ge=1, description="policy-sample replay buffer ([C] 200,000)")
+    amp_replay_keep_prob: float = Field(0.01, gt=0.0, le=1.0, description="keep probability once the replay buffer has filled ([C] 0.01)")
+    amp_demo_buffer_size: int = Field(200_000, ge=1, description="demo-window ring buffer, refilled with amp_batch fresh windows per step ([C] 200,000)")
+
     def observation(self) -> PHCObservation:
         return PHCObservation(self.obs, self.sixd)
 

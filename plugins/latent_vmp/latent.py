@@ -1,0 +1,203 @@
+"""VMP's latent space (stage I): the window encoder, the N(0, I) prior, the task action = z.
+
+:class:`VmpLatent` holds the VAE and the feature standardization statistics (buffers, saved with
+the weights). Its :meth:`~VmpLatent.encoder` reads ``obs.extra["window"]``: (N, 2W+1, F)
+heading-normalized, **unstandardized** features as :meth:`~VmpLatent.windows` computes them from a
+motion library; it standardizes them itself. The decoder of the LatentSpace interface (PD targets
+from proprioception and z) is VMP's stage II tracking policy, which is not built yet: calling it
+raises :class:`NotImplementedError`. The VAE's own window decoder is :meth:`~VmpLatent.decode_window`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Literal
+
+import torch
+from pydantic import BaseModel, ConfigDict, Field
+from torch import Tensor
+
+from mocap.interfaces import Box, LatentSample, LatentSpace
+from mocap.skeleton import Skeleton
+from mocap.state import Observations
+from mocap_vmp.features import (
+    FeatureLayout,
+    destandardize,
+    frame_features,
+    resolve_end_effectors,
+    standardize,
+    window_features,
+    window_rows,
+)
+from mocap_vmp.vae import MotionVAE
+
+ARCHITECTURE_KEYS = ("window_half", "latent_dim", "channels", "res_blocks", "downsample", "dilation_growth", "end_effectors")
+
+
+class VmpParams(BaseModel):
+    """VMP stage I (the motion VAE and its features). Tags: [P] paper, [X] our choice (not in the paper)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    window_half: int = Field(
+        30,
+        ge=1,
+        description="W: windows hold 2W+1 frames [P: W = 30, 61 frames, 1 s at the paper's rate]; frames are the "
+        "clips' own frames (no resampling [X]: clips at different rates give windows of different durations)",
+    )
+    latent_dim: int = Field(64, ge=1, description="d_z [P: 64]")
+    channels: int = Field(
+        48, ge=1, description="conv width [X: the paper gives no widths; 96 reaches its ~0.8 M parameters; 48 is the CPU default]"
+    )
+    res_blocks: int = Field(4, ge=0, description="ResNet blocks in encoder and decoder [P: 4]")
+    downsample: int = Field(2, ge=0, description="stride-2 conv layers before the ResNet blocks [X: not in the paper]")
+    dilation_growth: int = Field(3, ge=1, description="ResBlock i has dilation growth^i [X: Jukebox-style; not in the paper]")
+    end_effectors: list[str] | None = Field(
+        None,
+        description="bodies whose root-relative positions form p [P: hands and feet]; None = the hands and feet among "
+        "the skeleton's end effectors (names containing 'hand' or 'foot')",
+    )
+    std_min: float = Field(
+        1e-6, gt=0, description="floor of the standardization std, for features that never vary in the data [X: not in the paper]"
+    )
+    latent_for_policy: Literal["mean", "sample"] = Field(
+        "mean", description="z_t given to the policy and precomputed per frame: posterior mean or a sample [X: paper silent]"
+    )
+
+
+class VmpLatent(LatentSpace):
+    """The VMP window VAE as a :class:`~mocap.interfaces.LatentSpace` (module docstring)."""
+
+    def __init__(self, params: VmpParams, skeleton: Skeleton):
+        super().__init__()
+        self.params = params
+        self.skeleton = skeleton
+        ee = resolve_end_effectors(skeleton, params.end_effectors)
+        self.layout = FeatureLayout(skeleton.num_dofs, ee)
+        self.register_buffer("ee_index", torch.tensor([skeleton.body_index(n) for n in ee], dtype=torch.long), persistent=False)
+        F = self.layout.dim
+        self.window = 2 * params.window_half + 1
+        self.latent_dim = params.latent_dim
+        self.vae = MotionVAE(F, self.window, params.latent_dim, params.channels, params.res_blocks, params.downsample, params.dilation_growth)
+        self.register_buffer("feat_mean", torch.zeros(F))
+        self.register_buffer("feat_std", torch.ones(F))
+        #: (total_frames, d_z) per-frame latents of the training library (set after training / loading)
+        self.frame_latents: Tensor | None = None
+        self.clip_names: list[str] = []
+
+    @property
+    def config(self) -> dict[str, Any]:
+        d = self.params.model_dump(mode="json")
+        d["end_effectors"] = list(self.layout.end_effectors)
+        return d
+
+    # ----------------------------------------------------------------------------- features
+    def library_frame_features(self, lib: Any) -> Tensor:
+        """(total_frames, F) every frame of ``lib`` in its own heading frame (for the statistics)."""
+        return frame_features(lib, self.ee_index.to(lib.root_pos.device))
+
+    def set_statistics(self, mean: Tensor, std: Tensor) -> None:
+        self.feat_mean.copy_(mean)
+        self.feat_std.copy_(std)
+
+    def windows(self, lib: Any, centres: Tensor) -> Tensor:
+        """(N, 2W+1, F) unstandardized windows centred at packed rows ``centres`` of motion library ``lib``."""
+        rows = window_rows(lib, centres, self.params.window_half)
+        return window_features(lib, rows, self.ee_index.to(rows.device))
+
+    def standardize(self, window: Tensor) -> Tensor:
+        return standardize(window, self.feat_mean, self.feat_std)
+
+    def destandardize(self, window: Tensor) -> Tensor:
+        return destandardize(window, self.feat_mean, self.feat_std)
+
+    # -------------------------------------------------------------------------- LatentSpace
+    def encoder(self, obs: Observations) -> LatentSample:
+        """Posterior N(mu, sigma^2) of the window ``obs.extra["window"]`` (N, 2W+1, F) (unstandardized);
+        ``z`` is the mean or a sample per ``latent_for_policy``."""
+        window = obs.extra.get("window") if obs.extra else None
+        if window is None:
+            raise KeyError('the vmp encoder reads obs.extra["window"], an (N, 2W+1, F) motion window (VmpLatent.windows)')
+        if window.shape[-2:] != (self.window, self.layout.dim):
+            raise ValueError(f"vmp window must be (N, {self.window}, {self.layout.dim}), got {tuple(window.shape)}")
+        mu, logvar = self.vae.encode(self.standardize(window.to(self.feat_mean)))
+        std = torch.exp(0.5 * logvar)
+        z = mu if self.params.latent_for_policy == "mean" else mu + std * torch.randn_like(mu)
+        return LatentSample(mean=mu, std=std, z=z)
+
+    def decoder(self, obs: Observations, z: Tensor) -> Tensor:
+        raise NotImplementedError(
+            "vmp: the decoder to PD targets is VMP's stage II tracking policy, which is not built yet; only stage I "
+            "(the motion VAE: encoder, prior, VmpLatent.decode_window) exists"
+        )
+
+    def prior(self, obs: Observations) -> LatentSample:
+        """N(0, I), independent of the state."""
+        n = obs.proprio.shape[0]
+        zeros = torch.zeros(n, self.latent_dim, device=self.feat_mean.device)
+        return LatentSample(mean=zeros, std=torch.ones_like(zeros), z=zeros)
+
+    @property
+    def task_action_space(self) -> Box:
+        """A task policy acts directly in the latent space: Box(d_z), unbounded."""
+        return Box((self.latent_dim,))
+
+    def to_latent(self, obs: Observations, task_action: Tensor) -> Tensor:
+        """The task action *is* z (absolute latent, no residual over the prior)."""
+        return task_action
+
+    # ---------------------------------------------------------------------------- the VAE
+    def decode_window(self, z: Tensor) -> Tensor:
+        """(N, 2W+1, F) unstandardized window decoded from ``z``; the orientation channels are the
+        6-D of the Gram-Schmidt matrix."""
+        from mocap.rotations import matrix_to_sixd, sixd_to_matrix
+
+        y = self.destandardize(self.vae.decode(z))
+        s = self.layout.theta
+        return torch.cat((y[..., : s.start], matrix_to_sixd(sixd_to_matrix(y[..., s])), y[..., s.stop :]), -1)
+
+    @torch.no_grad()
+    def encode_library(self, lib: Any, batch: int = 1024) -> Tensor:
+        """(total_frames, d_z) posterior means of the window centred at every frame of every clip."""
+        out = []
+        for s in range(0, lib.total_frames, batch):
+            centres = torch.arange(s, min(s + batch, lib.total_frames), device=lib.root_pos.device)
+            mu, _ = self.vae.encode(self.standardize(self.windows(lib, centres).to(self.feat_mean.device)))
+            out.append(mu)
+        return torch.cat(out)
+
+
+def make_vmp(
+    params: VmpParams | None = None,
+    *,
+    skeleton: Skeleton,
+    checkpoint: str | Path | None = None,
+    device: torch.device | str = "cpu",
+) -> VmpLatent:
+    """Registry factory: an untrained VMP latent, or with ``checkpoint`` (the trainer's ``vae.pt`` or its
+    resumable ``vmp.pt``) the trained one with its per-frame latents, in eval mode."""
+    params = params or VmpParams()
+    latent = VmpLatent(params, skeleton)
+    if checkpoint is not None:
+        from mocap.checkpoint import load_checkpoint
+
+        saved = load_checkpoint(Path(checkpoint))
+        state = saved.get("latent")
+        if state is None:
+            raise ValueError(f"{checkpoint}: not a vmp checkpoint (no 'latent' entry)")
+        config = saved.get("config") or {}
+        diff = [k for k in ARCHITECTURE_KEYS if k in config and config[k] != latent.config[k]]
+        if diff:
+            detail = ", ".join(f"{k}: checkpoint {config[k]!r} vs spec {latent.config[k]!r}" for k in diff)
+            raise ValueError(f"{checkpoint}: the saved vmp latent does not match the spec ({detail})")
+        try:
+            latent.load_state_dict(state)
+        except RuntimeError as exc:
+            raise ValueError(f"{checkpoint}: not the weights of this vmp latent ({exc})") from None
+        latent.frame_latents = saved.get("frame_latents")
+        latent.clip_names = list(saved.get("clip_names") or [])
+        latent.eval()
+    return latent.to(device)
+
+
+__all__ = ["VmpLatent", "VmpParams", "make_vmp"]
