@@ -65,7 +65,9 @@ from torch import Tensor
 from mocap.checkpoint import load_checkpoint, save_checkpoint
 from mocap.hooks import hookimpl
 from mocap.interfaces import Imitator, Simulator, StageResult, Trainer
+from mocap.hard_negatives import failure_weights
 from mocap.pipeline import StageFailed
+from mocap.progress import IterationProgress
 from mocap.latent_imitator import LatentImitator, observations_to
 from mocap.motion.library import MotionLibrary
 from mocap.state import HumanoidState, MotionFrames, Observations, SimState
@@ -147,22 +149,6 @@ class DistillParams(BaseModel):
 
 
 # ---------------------------------------------------------------------------------- pure helpers
-def failure_weights(fail_counts: Tensor, base: Tensor, floor: float) -> Tensor:
-    """Clip sampling probabilities ``(1 − floor) f / Σf + floor · b`` (``b`` normalized; ``b`` when Σf = 0).
-
-    Sums to 1; with ``floor = 0`` the support is exactly the clips that failed (PHC+); with
-    ``floor > 0`` every clip with ``b_c > 0`` keeps at least ``floor · b_c``.
-    """
-    f = fail_counts.to(torch.float64).clamp_min(0.0)
-    b = base.to(torch.float64)
-    b = b / b.sum()
-    total = f.sum()
-    if float(total) <= 0.0:
-        return b.clone()
-    w = (1.0 - floor) * f / total + floor * b
-    return w / w.sum()
-
-
 def mixture_beta(progress: float, start: float, end: float, anneal_end: float) -> float:
     """DAgger's β (probability that the teacher acts): ``start`` at progress 0, linear to ``end`` at
     ``anneal_end``, ``end`` afterwards."""
@@ -519,7 +505,13 @@ class DistillTrainer(Trainer):
 
         total = p.iterations
         budget = total * p.batch_size
-        progress_bar = _Progress(ctx.console, total, p.print_every)
+        progress_bar = IterationProgress(
+            ctx.console,
+            total,
+            p.print_every,
+            "distill",
+            [("loss/action", "action", ".4g"), ("loss/kl", "kl", ".3g"), ("episode/length", "len", ".1f"), ("eval/success_rate", "eval success", ".2f")],
+        )
         last_stats: dict[str, float] = {}
         t_start = time.perf_counter()
         steps_at_start = env_steps
@@ -741,55 +733,6 @@ def _summary(stats: dict[str, float], last_eval: dict[str, float], iteration: in
             out[key] = float(value)
     out.update({k: float(v) for k, v in last_eval.items()})
     return out
-
-
-class _Progress:
-    """A live rich progress bar on a terminal; a plain line every ``every`` iterations otherwise."""
-
-    def __init__(self, console: Any, total: int, every: int):
-        self.console = console
-        self.total = total
-        self.every = every
-        self.bar: Any = None
-        self.task: Any = None
-        if console is not None and getattr(console, "is_terminal", False):
-            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
-
-            self.bar = Progress(
-                TextColumn("[bold]distill[/]"),
-                BarColumn(),
-                MofNCompleteColumn(),
-                TimeRemainingColumn(),
-                TextColumn("{task.description}"),
-                console=console,
-            )
-            self.task = self.bar.add_task("", total=total)
-            self.bar.start()
-
-    @staticmethod
-    def line(iteration: int, env_steps: int, s: dict[str, float]) -> str:
-        parts = [f"it {iteration}", f"{env_steps:,} steps", f"{s.get('steps_per_s', 0.0):,.0f} steps/s"]
-        if "loss/action" in s:
-            parts.append(f"action {s['loss/action']:.4g}")
-        if "loss/kl" in s:
-            parts.append(f"kl {s['loss/kl']:.3g}")
-        if "episode/length" in s:
-            parts.append(f"len {s['episode/length']:.1f}")
-        if "eval/success_rate" in s:
-            parts.append(f"eval success {s['eval/success_rate']:.2f}")
-        return " | ".join(parts)
-
-    def update(self, iteration: int, env_steps: int, stats: dict[str, float]) -> None:
-        text = self.line(iteration, env_steps, stats)
-        if self.bar is not None:
-            self.bar.update(self.task, completed=iteration, description=text)
-        elif self.console is not None and (iteration % self.every == 0 or iteration == self.total):
-            self.console.print(f"distill: {text}")
-
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.stop()
-            self.bar = None
 
 
 # ---------------------------------------------------------------------------------- plugin hook

@@ -29,6 +29,7 @@ from torch import Tensor
 
 from mocap.checkpoint import load_checkpoint, save_checkpoint
 from mocap.interfaces import Box, MultiDiscrete, StageResult, Trainer
+from mocap.progress import IterationProgress
 from mocap.rl.networks import ActorCritic, save_policy
 
 CHECKPOINT_FORMAT = "mocap.rl.ppo/1"
@@ -302,7 +303,13 @@ class PPOTrainer(Trainer):
                 spec_yaml=ctx.spec_yaml(),
             )
 
-        progress = _Progress(ctx.console, p.iterations, p.print_every)
+        progress = IterationProgress(
+            ctx.console,
+            p.iterations,
+            p.print_every,
+            "ppo",
+            [("episode/return", "return", ".3g"), ("episode/length", "len", ".1f"), ("episode/success", "success", ".2f")],
+        )
         try:
             while iteration < p.iterations:
                 # ---------------------------------------------------------------- rollout
@@ -490,53 +497,6 @@ def _summary(stats: dict[str, float], iteration: int, env_steps: int) -> dict[st
         if key.startswith("episode/") or key in ("explained_variance", "steps_per_s_run", "approx_kl"):
             out[key] = float(value)
     return out
-
-
-class _Progress:
-    """A live rich progress bar on a terminal; a plain line every ``every`` iterations otherwise."""
-
-    def __init__(self, console: Any, total: int, every: int):
-        self.console = console
-        self.total = total
-        self.every = every
-        self.bar: Any = None
-        self.task: Any = None
-        if console is not None and getattr(console, "is_terminal", False):
-            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
-
-            self.bar = Progress(
-                TextColumn("[bold]ppo[/]"),
-                BarColumn(),
-                MofNCompleteColumn(),
-                TimeRemainingColumn(),
-                TextColumn("{task.description}"),
-                console=console,
-            )
-            self.task = self.bar.add_task("", total=total)
-            self.bar.start()
-
-    @staticmethod
-    def line(iteration: int, env_steps: int, s: dict[str, float]) -> str:
-        parts = [f"it {iteration}", f"{env_steps:,} steps", f"{s['steps_per_s']:,.0f} steps/s"]
-        if "episode/return" in s:
-            parts.append(f"return {s['episode/return']:.3g}")
-        if "episode/length" in s:
-            parts.append(f"len {s['episode/length']:.1f}")
-        if "episode/success" in s:
-            parts.append(f"success {s['episode/success']:.2f}")
-        return " | ".join(parts)
-
-    def update(self, iteration: int, env_steps: int, stats: dict[str, float]) -> None:
-        text = self.line(iteration, env_steps, stats)
-        if self.bar is not None:
-            self.bar.update(self.task, completed=iteration, description=text)
-        elif self.console is not None and (iteration % self.every == 0 or iteration == self.total):
-            self.console.print(f"ppo: {text}")
-
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.stop()
-            self.bar = None
 
 
 __all__ = [

@@ -67,6 +67,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from mocap.hard_negatives import failure_weights as hard_negative_weights
 from mocap.interfaces import Box, Imitator, Simulator
 from mocap.motion.library import MotionLibrary
 from mocap.observations import imitation_goal, imitation_goal_dim, proprioception, proprioception_dim
@@ -662,21 +663,6 @@ def _assign_rows(dst: HumanoidState, ids: Tensor, src: HumanoidState) -> None:
         d, s = getattr(dst, name, None), getattr(src, name, None)
         if isinstance(d, Tensor) and isinstance(s, Tensor) and d.dim() > 0 and d.numel():
             d[ids] = s.to(d)
-
-
-def hard_negative_weights(fail_counts: Tensor, base: Tensor, floor: float) -> Tensor:
-    """Clip sampling probabilities ``(1 - floor) f / sum(f) + floor b`` (``b`` when ``sum(f) = 0``).
-
-    Every clip with ``b_c > 0`` keeps at least ``floor * b_c`` (for ``floor > 0``); the result sums to 1.
-    """
-    f = fail_counts.to(torch.float64).clamp_min(0.0)
-    b = base.to(torch.float64)
-    b = b / b.sum()
-    total = f.sum()
-    if float(total) <= 0.0:
-        return b.clone()
-    w = (1.0 - floor) * f / total + floor * b
-    return w / w.sum()
 
 
 __all__ = ["ActionMap", "ImitationEnv", "PHCObservation", "PolicyImitator", "hard_negative_weights", "pd_offset_scale"]
