@@ -65,7 +65,7 @@ from torch import Tensor
 from mocap.checkpoint import load_checkpoint, save_checkpoint
 from mocap.hooks import hookimpl
 from mocap.interfaces import Imitator, Simulator, StageResult, Trainer
-from mocap.hard_negatives import failure_weights
+from mocap.hard_negatives import FailureTracker, failure_weights
 from mocap.pipeline import StageFailed
 from mocap.progress import IterationProgress
 from mocap.latent_imitator import LatentImitator, observations_to
@@ -248,18 +248,11 @@ class DistillEpisodes:
         self.num_envs = N = int(simulator.num_envs)
         self.dt = float(simulator.dt)
         self.gen = torch.Generator().manual_seed(int(seed))
-        C = lib.num_clips
         dev = lib.device
         self.clip_ids = torch.zeros(N, dtype=torch.long, device=dev)
         self.start_time = torch.zeros(N, dtype=torch.float64, device=dev)
         self.progress = torch.zeros(N, dtype=torch.long, device=dev)
-        self.base_weights = lib.weights.detach().to("cpu", torch.float64).clone()
-        self.fail_counts = torch.zeros(C, dtype=torch.float64)
-        self.episodes_per_clip = torch.zeros(C, dtype=torch.long)
-        self.failures_per_clip = torch.zeros(C, dtype=torch.long)
-        self._win_episodes = torch.zeros(C, dtype=torch.float64)
-        self._win_failures = torch.zeros(C, dtype=torch.float64)
-        self._win_total = 0
+        self.failures = FailureTracker(lib, params)
         self._durations = lib.durations.to(dev, torch.float64)
         self._loops = lib.loops.to(dev)
         self.threshold = p.termination_threshold
@@ -313,26 +306,27 @@ class DistillEpisodes:
         return self.library.weights.detach().to("cpu", torch.float64).clone()
 
     def _record(self, clip_ids: Tensor, failed: Tensor) -> None:
-        ones = torch.ones_like(clip_ids, dtype=torch.float64)
-        f = failed.to(torch.float64)
-        self.episodes_per_clip.index_add_(0, clip_ids, ones.long())
-        self.failures_per_clip.index_add_(0, clip_ids, f.long())
-        self._win_episodes.index_add_(0, clip_ids, ones)
-        self._win_failures.index_add_(0, clip_ids, f)
-        self._win_total += int(clip_ids.numel())
-        if self._win_total >= self.params.update_every:
-            seen = self._win_episodes > 0
-            rate = torch.where(seen, self._win_failures / self._win_episodes.clamp_min(1.0), torch.zeros_like(self._win_failures))
-            self.add_failures(rate)
-            self._win_episodes.zero_()
-            self._win_failures.zero_()
-            self._win_total = 0
+        self.failures.record(clip_ids, failed)
 
     def add_failures(self, amount: Tensor) -> None:
-        """``f ← decay · f + amount`` and refresh the sampling weights (when hard negatives are on)."""
-        self.fail_counts = self.fail_counts * self.params.hard_negative_decay + amount.to(torch.float64)
-        if self.params.hard_negative:
-            self.library.set_weights(failure_weights(self.fail_counts, self.base_weights, self.params.hard_negative_floor))
+        self.failures.add_failures(amount)
+
+    # per-clip failure bookkeeping lives in the shared tracker (mocap.hard_negatives)
+    @property
+    def fail_counts(self) -> Tensor:
+        return self.failures.fail_counts
+
+    @property
+    def episodes_per_clip(self) -> Tensor:
+        return self.failures.episodes_per_clip
+
+    @property
+    def failures_per_clip(self) -> Tensor:
+        return self.failures.failures_per_clip
+
+    @property
+    def base_weights(self) -> Tensor:
+        return self.failures.base_weights
 
     # ------------------------------------------------------------------------------ resume
     def state_dict(self) -> dict[str, Any]:
@@ -343,13 +337,7 @@ class DistillEpisodes:
             "clip_ids": self.clip_ids.cpu().clone(),
             "start_time": self.start_time.cpu().clone(),
             "progress": self.progress.cpu().clone(),
-            "fail_counts": self.fail_counts.clone(),
-            "episodes_per_clip": self.episodes_per_clip.clone(),
-            "failures_per_clip": self.failures_per_clip.clone(),
-            "win_episodes": self._win_episodes.clone(),
-            "win_failures": self._win_failures.clone(),
-            "win_total": self._win_total,
-            "weights": self.clip_weights,
+            **self.failures.state_dict(),
         }
         if hasattr(self.sim, "get_physics_state"):
             sd["physics"] = torch.from_numpy(np.array(self.sim.get_physics_state(), dtype=np.float64, copy=True))
@@ -368,13 +356,7 @@ class DistillEpisodes:
         self.clip_ids = state["clip_ids"].to(dev).clone()
         self.start_time = state["start_time"].to(dev).clone()
         self.progress = state["progress"].to(dev).clone()
-        self.fail_counts = state["fail_counts"].clone()
-        self.episodes_per_clip = state["episodes_per_clip"].clone()
-        self.failures_per_clip = state["failures_per_clip"].clone()
-        self._win_episodes = state["win_episodes"].clone()
-        self._win_failures = state["win_failures"].clone()
-        self._win_total = int(state["win_total"])
-        self.library.set_weights(state["weights"])
+        self.failures.load_state_dict(state)
         ids = torch.arange(self.num_envs)
         if "physics" in state and hasattr(self.sim, "set_physics_state"):
             self.sim.set_physics_state(ids, np.array(state["physics"].numpy(), dtype=np.float64, copy=True))

@@ -67,6 +67,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from mocap.hard_negatives import FailureTracker
 from mocap.hard_negatives import failure_weights as hard_negative_weights
 from mocap.interfaces import Box, Imitator, Simulator
 from mocap.motion.library import MotionLibrary
@@ -272,19 +273,12 @@ class ImitationEnv:
         self._gen = torch.Generator(device="cpu")
         self._gen.manual_seed(int(seed))
 
-        C = lib.num_clips
         dev = self.device
         self.clip_ids = torch.zeros(N, dtype=torch.long, device=dev)
         self.start_time = torch.zeros(N, dtype=torch.float64, device=dev)
         self.progress = torch.zeros(N, dtype=torch.long, device=dev)
         self.ep_return = torch.zeros(N, dtype=torch.float64, device=dev)
-        self.base_weights = lib.weights.detach().to("cpu", torch.float64).clone()
-        self.fail_counts = torch.zeros(C, dtype=torch.float64)
-        self.episodes_per_clip = torch.zeros(C, dtype=torch.long)
-        self.failures_per_clip = torch.zeros(C, dtype=torch.long)
-        self._win_episodes = torch.zeros(C, dtype=torch.float64)
-        self._win_failures = torch.zeros(C, dtype=torch.float64)
-        self._win_total = 0
+        self.failures = FailureTracker(lib, p)
         self._durations = lib.durations.to(dev, torch.float64)
         self._loops = lib.loops.to(dev)
         self._ref_next: MotionFrames | None = None
@@ -471,30 +465,28 @@ class ImitationEnv:
         }
 
     def _record(self, clip_ids: Tensor, failed: Tensor) -> None:
-        """Count finished training episodes; refresh the weights every ``update_every`` episodes."""
-        ones = torch.ones_like(clip_ids, dtype=torch.float64)
-        f = failed.to(torch.float64)
-        self.episodes_per_clip.index_add_(0, clip_ids, ones.long())
-        self.failures_per_clip.index_add_(0, clip_ids, f.long())
-        self._win_episodes.index_add_(0, clip_ids, ones)
-        self._win_failures.index_add_(0, clip_ids, f)
-        self._win_total += int(clip_ids.numel())
-        if self._win_total >= self.params.update_every:
-            seen = self._win_episodes > 0
-            rate = torch.where(seen, self._win_failures / self._win_episodes.clamp_min(1.0), torch.zeros_like(self._win_failures))
-            self._add_failures(rate)
-            self._win_episodes.zero_()
-            self._win_failures.zero_()
-            self._win_total = 0
+        """Count finished training episodes (the shared :class:`~mocap.hard_negatives.FailureTracker`)."""
+        self.failures.record(clip_ids, failed)
 
     def _add_failures(self, amount: Tensor) -> None:
-        self.fail_counts = self.fail_counts * self.params.hard_negative_decay + amount
-        self._refresh_weights()
+        self.failures.add_failures(amount)
 
-    def _refresh_weights(self) -> None:
-        if not self.params.hard_negative:
-            return
-        self.library.set_weights(hard_negative_weights(self.fail_counts, self.base_weights, self.params.hard_negative_floor))
+    # per-clip failure bookkeeping lives in the shared tracker (mocap.hard_negatives)
+    @property
+    def fail_counts(self) -> Tensor:
+        return self.failures.fail_counts
+
+    @property
+    def episodes_per_clip(self) -> Tensor:
+        return self.failures.episodes_per_clip
+
+    @property
+    def failures_per_clip(self) -> Tensor:
+        return self.failures.failures_per_clip
+
+    @property
+    def base_weights(self) -> Tensor:
+        return self.failures.base_weights
 
     def evaluate_clips(self, policy_fn: PolicyFn) -> dict[str, Any]:
         """Every clip once from frame 0 with ``policy_fn`` (flat obs -> action, deterministic) in a
@@ -579,13 +571,7 @@ class ImitationEnv:
             "start_time": self.start_time.cpu().clone(),
             "progress": self.progress.cpu().clone(),
             "ep_return": self.ep_return.cpu().clone(),
-            "fail_counts": self.fail_counts.clone(),
-            "episodes_per_clip": self.episodes_per_clip.clone(),
-            "failures_per_clip": self.failures_per_clip.clone(),
-            "win_episodes": self._win_episodes.clone(),
-            "win_failures": self._win_failures.clone(),
-            "win_total": self._win_total,
-            "weights": self.clip_weights,
+            **self.failures.state_dict(),
         }
         if self.amp_trainer is not None:
             assert self.amp_history is not None
@@ -610,13 +596,7 @@ class ImitationEnv:
         self.start_time = state["start_time"].to(dev).clone()
         self.progress = state["progress"].to(dev).clone()
         self.ep_return = state["ep_return"].to(dev).clone()
-        self.fail_counts = state["fail_counts"].clone()
-        self.episodes_per_clip = state["episodes_per_clip"].clone()
-        self.failures_per_clip = state["failures_per_clip"].clone()
-        self._win_episodes = state["win_episodes"].clone()
-        self._win_failures = state["win_failures"].clone()
-        self._win_total = int(state["win_total"])
-        self.library.set_weights(state["weights"])
+        self.failures.load_state_dict(state)
         if self.amp_trainer is not None:
             assert self.amp_history is not None
             if "amp" not in state:
