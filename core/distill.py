@@ -172,6 +172,11 @@ class PDTargetTeacher(Imitator):
     def __init__(self, imitator: Imitator):
         self.imitator = imitator
 
+    @property
+    def policy(self) -> Any:
+        """The wrapped imitator's policy network (students may copy its input statistics)."""
+        return getattr(self.imitator, "policy", None)
+
     def observe(self, state: Any, reference: Any) -> Any:
         return self.imitator.observe(state, reference)
 
@@ -460,7 +465,10 @@ class DistillTrainer(Trainer):
             ctx.log.truncate_after(0)
             init = getattr(student, "init_from_teacher", None)
             if callable(init):
-                init(teacher)
+                try:
+                    init(teacher)
+                except ValueError as exc:  # a student/teacher mismatch the spec has to fix
+                    raise DistillError(f"latent {type(student).__name__}: {exc}") from None
             episodes.reset_all()
         self._check_dims(teacher, student, episodes, device)
 
