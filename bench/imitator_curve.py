@@ -33,7 +33,8 @@ def evaluate_checkpoint(checkpoint: Path) -> dict:
 
     torch.set_num_threads(1)
     plugins = get_plugins()
-    resolved, ckpt = load_evaluation_target(checkpoint, plugins)
+    target = load_evaluation_target(checkpoint, plugins)
+    resolved, ckpt = target.resolved, target.imitator_checkpoint
     spec = resolved.spec
     skeleton = plugins.get("humanoid", spec.humanoid.name).build(resolved.params.get("humanoid"))
     lib = MotionLibrary(plugins.get("motion_source", spec.motions.name).build(resolved.params.get("motions")).load(skeleton), skeleton)

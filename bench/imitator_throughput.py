@@ -82,7 +82,8 @@ def realtime(checkpoint: Path, plugins, seconds: float) -> float:
     from mocap.evaluation import load_evaluation_target
     from mocap.motion.library import MotionLibrary
 
-    resolved, ckpt = load_evaluation_target(checkpoint, plugins)
+    target = load_evaluation_target(checkpoint, plugins)
+    resolved, ckpt = target.resolved, target.imitator_checkpoint
     spec = resolved.spec
     skeleton = plugins.get("humanoid", spec.humanoid.name).build(resolved.params.get("humanoid"))
     lib = MotionLibrary(plugins.get("motion_source", spec.motions.name).build(resolved.params.get("motions")).load(skeleton), skeleton)

@@ -68,7 +68,7 @@ from mocap.interfaces import Imitator, Simulator, StageResult, Trainer
 from mocap.hard_negatives import FailureTracker, failure_weights
 from mocap.pipeline import StageFailed
 from mocap.progress import IterationProgress
-from mocap.latent_imitator import LatentImitator, observations_to
+from mocap.latent_imitator import LatentImitator, PDTargetTeacher, observations_to
 from mocap.motion.library import MotionLibrary
 from mocap.state import HumanoidState, MotionFrames, Observations, SimState
 
@@ -160,34 +160,6 @@ def mixture_beta(progress: float, start: float, end: float, anneal_end: float) -
 # ------------------------------------------------------------------------------ latent files
 class DistillError(StageFailed):
     """A spec that cannot be distilled (shown to the user without a traceback)."""
-
-
-class PDTargetTeacher(Imitator):
-    """A teacher whose "policy output" is its PD targets (and whose mapping is the identity).
-
-    With it, a student learns PD targets directly, so its decoder drives the simulator without the
-    reference motion (the ``label: pd_targets`` switch of :class:`DistillParams`).
-    """
-
-    def __init__(self, imitator: Imitator):
-        self.imitator = imitator
-
-    @property
-    def policy(self) -> Any:
-        """The wrapped imitator's policy network (students may copy its input statistics)."""
-        return getattr(self.imitator, "policy", None)
-
-    def observe(self, state: Any, reference: Any) -> Any:
-        return self.imitator.observe(state, reference)
-
-    def act(self, obs: Any, deterministic: bool = True) -> Tensor:
-        return self.imitator.act(obs, deterministic)
-
-    def policy_output(self, obs: Any, deterministic: bool = True) -> Tensor:
-        return self.imitator.act(obs, deterministic)
-
-    def to_pd_targets(self, obs: Any, output: Tensor) -> Tensor:
-        return output
 
 
 def save_latent(path: Path, latent: torch.nn.Module, extra: dict[str, Any] | None = None, *, spec_yaml: str | None = None) -> None:

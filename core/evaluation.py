@@ -17,7 +17,7 @@ import math
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any, Callable, Optional
+from typing import Annotated, Any, Callable, Literal, Optional
 
 import torch
 import typer
@@ -30,6 +30,7 @@ from mocap.hooks import hookimpl
 from mocap.interfaces import Imitator, Metric, Simulator, StageResult, Trainer
 from mocap.metrics import BUILTIN_METRICS, PROTOCOL, SuccessParams, _success_metric, default_metrics, make_metric
 from mocap.motion.library import MotionLibrary
+from mocap.pipeline import StageFailed
 from mocap.state import Trajectories
 
 
@@ -44,6 +45,9 @@ class ImitationEvalParams(BaseModel):
     video_clip: str | None = Field(None, description="clip to record (default: the first clip)")
     video_seconds: float = Field(4.0, gt=0)
     video_format: str = Field("mp4", pattern="^(mp4|gif)$")
+    target: Literal["auto", "imitator", "latent"] = Field(
+        "auto", description="what to evaluate: 'auto' = the latent space when the spec trains one (as an imitator, z = encoder mean), else the imitator"
+    )
 
 
 @dataclass
@@ -218,6 +222,17 @@ class ImitationEval(Trainer):
         lib = MotionLibrary(motion_set, skeleton)
         upstream = ctx.upstream.get("imitator")
         imitator = ctx.stage_component("imitator", checkpoint=upstream.checkpoint if upstream else None)
+        latent_stage = ctx.upstream.get("latent")
+        if p.target != "imitator" and latent_stage is not None and latent_stage.checkpoint is not None:
+            from mocap.distill import load_latent_state
+            from mocap.latent_imitator import PDTargetTeacher, latent_imitator
+
+            latent = ctx.stage_component("latent", checkpoint=latent_stage.checkpoint)
+            label = load_latent_state(latent_stage.checkpoint)["extra"].get("label", "policy_output")
+            imitator = latent_imitator(PDTargetTeacher(imitator) if label == "pd_targets" else imitator, latent)
+            ctx.console.print(f"imitation_eval: evaluating the {ctx.spec.latent.name} latent (z = encoder mean)")
+        elif p.target == "latent":
+            raise StageFailed("imitation_eval target 'latent': the spec has no trained latent stage")
 
         def make_sim(n: int) -> Simulator:
             return ctx.build("simulator", skeleton=skeleton, num_envs=n, seed=ctx.seed)
@@ -282,6 +297,63 @@ def render_table(table: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def compare_tables(teacher: dict[str, Any], student: dict[str, Any]) -> dict[str, Any]:
+    """How much of the teacher's imitation a student keeps: clips both succeed on, the share of the
+    teacher's successful clips the student also succeeds on, and MPJPE-g ratios (student / teacher)
+    over all clips and over the clips both succeed on."""
+    t_ok = {c for c, r in teacher["clips"].items() if r["success"]}
+    s_ok = {c for c, r in student["clips"].items() if r["success"]}
+    both = sorted(t_ok & s_ok)
+    retained = len(both) / len(t_ok) if t_ok else float("nan")
+
+    def mean_over(table: dict[str, Any], clips: list[str]) -> float:
+        vals = [table["clips"][c]["mpjpe_g"] for c in clips if table["clips"][c].get("mpjpe_g") is not None]
+        return sum(vals) / len(vals) if vals else float("nan")
+
+    t_both, s_both = mean_over(teacher, both), mean_over(student, both)
+    return {
+        "teacher_succeeded": sorted(t_ok),
+        "student_succeeded": sorted(s_ok),
+        "both_succeeded": both,
+        "retained_fraction": retained,
+        "mpjpe_g_ratio_all": student["aggregate"]["mpjpe_g"] / teacher["aggregate"]["mpjpe_g"],
+        "mpjpe_g_teacher_on_both": t_both,
+        "mpjpe_g_student_on_both": s_both,
+        "mpjpe_g_ratio_on_both": s_both / t_both if both else float("nan"),
+    }
+
+
+def render_comparison(tables: dict[str, dict[str, Any]], comparison: dict[str, Any] | None = None, console_table: bool = False) -> Any:
+    """One row per evaluated policy (PULSE Table 1 layout): success, MPJPE-g/L, acceleration and
+    velocity errors over all clips. Markdown text, or a rich Table with ``console_table``."""
+    cols = [("success", None), ("mpjpe_g", "mm"), ("mpjpe_l", "mm"), ("acc_err", "mm/frame^2"), ("vel_err", "mm/frame")]
+    header = ["policy", *[f"{c} ({u})" if u else c for c, u in cols]]
+    rows = []
+    for name, t in tables.items():
+        agg = t["aggregate"]
+        rows.append([name, f"{agg['succeeded']}/{agg['total']}", *[_cell(agg.get(c)) for c, _ in cols[1:]]])
+    note = ""
+    if comparison is not None:
+        note = (
+            f"student keeps {len(comparison['both_succeeded'])} of the teacher's {len(comparison['teacher_succeeded'])} successful clips "
+            f"({100 * comparison['retained_fraction']:.0f}%); MPJPE-g on the clips both succeed on: "
+            f"{_cell(comparison['mpjpe_g_student_on_both'])} vs {_cell(comparison['mpjpe_g_teacher_on_both'])} mm "
+            f"(ratio {_cell(comparison['mpjpe_g_ratio_on_both'])})"
+        )
+    if console_table:
+        from rich.table import Table
+
+        out = Table(title="imitation on the same clips", caption=note or None)
+        for col in header:
+            out.add_column(col, justify="left" if col == "policy" else "right")
+        for r in rows:
+            out.add_row(*r)
+        return out
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(r) + " |" for r in rows]
+    return "\n".join(lines) + ("\n\n" + note + "\n" if note else "\n")
+
+
 def _cell(v: Any) -> str:
     return f"{v:.3g}" if isinstance(v, float) else str(v)
 
@@ -305,42 +377,64 @@ def register_imitators(register):  # type: ignore[no-untyped-def]
     register("pd_replay", _make_pd_replay, params=NoParams, description="baseline: PD targets = the next reference pose")
 
 
-def load_evaluation_target(target: Path, plugins: Any) -> tuple[Any, Path | None]:
-    """(resolved spec, imitator checkpoint) from a policy checkpoint or a run directory.
+@dataclass
+class EvalTarget:
+    """What ``mocap eval`` / ``mocap generate`` evaluate: a validated spec and the stage checkpoints.
 
-    A checkpoint carries the spec that trained it; a run directory has ``spec.yaml`` and
-    ``stages.json`` (the imitator stage's checkpoint, None for untrained baselines).
+    ``latent_checkpoint`` is set when the target is a latent space; it is then evaluated as an
+    imitator (:class:`~mocap.latent_imitator.LatentImitator`, ``z`` = encoder mean) on top of the
+    imitator it was distilled from (``imitator_checkpoint``).
     """
-    import json
 
+    resolved: Any
+    imitator_checkpoint: Path | None
+    latent_checkpoint: Path | None = None
+
+    @property
+    def spec(self) -> Any:
+        return self.resolved.spec
+
+
+@dataclass
+class LoadedTarget:
+    """An :class:`EvalTarget` built: skeleton, motion library, the policy to evaluate, and the parts."""
+
+    target: EvalTarget
+    skeleton: Any
+    library: MotionLibrary
+    imitator: Imitator  # the trained imitator (the teacher, for a latent)
+    latent: Any  # the latent space, or None
+    label: str  # what the latent's decoder outputs: "policy_output" (teacher's raw output) or "pd_targets"
+    policy: Imitator  # what imitation evaluation rolls out
+    make_sim: Callable[[int], Simulator]
+
+    def to_pd_targets(self, obs: Any, output: torch.Tensor) -> torch.Tensor:
+        """PD targets from a latent decoder's output (identity for ``label: pd_targets``)."""
+        return output if self.label == "pd_targets" else self.imitator.to_pd_targets(obs, output)
+
+
+_POLICY_NAMES = ("latent.pt", "policy.pt")
+
+
+def _stage_checkpoint(spec: Any, stage: str) -> Path | None:
+    section = getattr(spec, stage, None)
+    ckpt = getattr(section, "checkpoint", None) if section is not None else None
+    return Path(ckpt) if ckpt else None
+
+
+def _from_file(target: Path, plugins: Any) -> EvalTarget:
     import yaml
 
     from mocap.checkpoint import load_checkpoint
     from mocap.cli import UserError
-    from mocap.spec import validate_document
+    from mocap.spec import SpecError, load_spec, validate_document
 
-    target = Path(target)
-    if target.is_dir():
-        spec_file, stages_file = target / "spec.yaml", target / "stages.json"
-        if not spec_file.is_file():
-            raise UserError(f"{target}: not a run directory (no spec.yaml)")
-        resolved = validate_document(yaml.safe_load(spec_file.read_text()), plugins, source=str(spec_file))
-        checkpoint = None
-        if stages_file.is_file():
-            for stage in json.loads(stages_file.read_text()):
-                if stage["stage"] == "imitator" and stage.get("checkpoint"):
-                    checkpoint = Path(stage["checkpoint"])
-        if resolved.spec.imitator is None:
-            raise UserError(f"{spec_file}: the run has no imitator stage to evaluate")
-        if checkpoint is None and resolved.spec.imitator.trainer is not None:
-            from mocap.pipeline import stage_keys
-
-            partial = sorted((target.parent / "artifacts" / f"imitator-{stage_keys(resolved.spec)['imitator']}").glob("*.pt"))
-            hint = f"; evaluate its latest training checkpoint instead: mocap eval {partial[0]}" if partial else "; run it first"
-            raise UserError(f"{target}: the imitator stage has not finished (no checkpoint in stages.json){hint}")
-        return resolved, checkpoint
-    if not target.is_file():
-        raise UserError(f"{target}: no such checkpoint file or run directory")
+    if target.suffix in (".yaml", ".yml"):
+        try:
+            resolved = load_spec(target, plugins)
+        except SpecError as exc:
+            raise UserError(str(exc)) from None
+        return _check(EvalTarget(resolved, _stage_checkpoint(resolved.spec, "imitator"), _stage_checkpoint(resolved.spec, "latent")), target)
     try:
         data = load_checkpoint(target)
     except ValueError as exc:
@@ -349,16 +443,126 @@ def load_evaluation_target(target: Path, plugins: Any) -> tuple[Any, Path | None
     if not spec_yaml:
         raise UserError(f"{target}: the checkpoint carries no spec; evaluate its run directory instead")
     resolved = validate_document(yaml.safe_load(spec_yaml), plugins, source=f"{target} (embedded spec)")
-    if resolved.spec.imitator is None:
-        raise UserError(f"{target}: its spec has no imitator")
-    return resolved, target
+    from mocap.distill import CHECKPOINT_FORMAT as DISTILL_FORMAT, LATENT_FORMAT
+
+    if data.get("format") in (LATENT_FORMAT, DISTILL_FORMAT):
+        teacher = _stage_checkpoint(resolved.spec, "imitator")
+        return _check(EvalTarget(resolved, teacher, target), target)
+    return _check(EvalTarget(resolved, target), target)
+
+
+def _check(t: EvalTarget, source: Path) -> EvalTarget:
+    from mocap.cli import UserError
+
+    spec = t.spec
+    if spec.imitator is None:
+        raise UserError(f"{source}: its spec has no imitator")
+    if t.latent_checkpoint is not None and spec.latent is None:
+        raise UserError(f"{source}: a latent checkpoint, but its spec has no latent stage")
+    if t.latent_checkpoint is not None and t.imitator_checkpoint is None and spec.imitator.name not in ("pd_replay",):
+        raise UserError(f"{source}: the latent's imitator has no checkpoint (the spec names none, and no run records one)")
+    for path in (t.imitator_checkpoint, t.latent_checkpoint):
+        if path is not None and not Path(path).is_file():
+            raise UserError(f"{source}: checkpoint {path} does not exist (moved? evaluate a directory holding it)")
+    return t
+
+
+def load_evaluation_target(target: Path, plugins: Any) -> EvalTarget:
+    """The :class:`EvalTarget` of a checkpoint file, a run directory, a checkpoint directory or a spec.
+
+    * a file ``policy.pt`` / ``ppo.pt`` (imitator) or ``latent.pt`` / ``distill.pt`` (latent space):
+      its embedded spec; for a latent, the imitator checkpoint that spec names;
+    * a run directory (``spec.yaml`` + ``stages.json``): the imitator and latent stages' checkpoints
+      (the latent is evaluated when the run has one);
+    * a checkpoint directory (``checkpoints/<name>/``): its ``spec.yaml`` whose stages name their
+      ``checkpoint:`` files (relative to it), else its ``latent.pt`` or ``policy.pt``;
+    * a spec file whose imitator (and latent) stages name ``checkpoint:`` files.
+    """
+    import json
+
+    import yaml
+
+    from mocap.cli import UserError
+    from mocap.spec import SpecError, load_spec, validate_document
+
+    target = Path(target)
+    if target.is_dir():
+        spec_file, stages_file = target / "spec.yaml", target / "stages.json"
+        if stages_file.is_file() and spec_file.is_file():
+            resolved = validate_document(yaml.safe_load(spec_file.read_text()), plugins, source=str(spec_file))
+            found: dict[str, Path] = {}
+            for stage in json.loads(stages_file.read_text()):
+                if stage["stage"] in ("imitator", "latent") and stage.get("checkpoint"):
+                    found[stage["stage"]] = Path(stage["checkpoint"])
+            if resolved.spec.imitator is None:
+                raise UserError(f"{spec_file}: the run has no imitator stage to evaluate")
+            from mocap.pipeline import stage_keys
+
+            keys = stage_keys(resolved.spec)
+            for stage in ("imitator", "latent"):
+                section = getattr(resolved.spec, stage, None)
+                if section is not None and section.trainer is not None and stage not in found:
+                    partial = sorted((target.parent / "artifacts" / f"{stage}-{keys[stage]}").glob("*.pt"))
+                    hint = f"; evaluate its latest training checkpoint instead: mocap eval {partial[0]}" if partial else "; run it first"
+                    raise UserError(f"{target}: the {stage} stage has not finished (no checkpoint in stages.json){hint}")
+            return _check(EvalTarget(resolved, found.get("imitator"), found.get("latent")), target)
+        if spec_file.is_file():
+            try:
+                resolved = load_spec(spec_file, plugins)
+            except SpecError as exc:
+                raise UserError(str(exc)) from None
+            t = EvalTarget(resolved, _stage_checkpoint(resolved.spec, "imitator"), _stage_checkpoint(resolved.spec, "latent"))
+            return _check(t, target)
+        for name in _POLICY_NAMES:
+            if (target / name).is_file():
+                return _from_file(target / name, plugins)
+        raise UserError(f"{target}: not a run directory (spec.yaml + stages.json) nor a checkpoint directory ({' or '.join(_POLICY_NAMES)})")
+    if not target.is_file():
+        raise UserError(f"{target}: no such checkpoint file, spec or directory")
+    return _from_file(target, plugins)
+
+
+def build_evaluation_target(
+    target: EvalTarget, plugins: Any, *, motions: str | None = None, device: str = "cpu", use_latent: bool = True
+) -> LoadedTarget:
+    """Build the skeleton, motion library (``motions``: another source, default params), the
+    imitator, the latent space (when ``target`` has one and ``use_latent``) and the simulator factory."""
+    from mocap.distill import load_latent_state
+    from mocap.latent_imitator import PDTargetTeacher, latent_imitator
+
+    resolved, spec = target.resolved, target.spec
+    skeleton = plugins.get("humanoid", spec.humanoid.name).build(resolved.params.get("humanoid"))
+    if motions is None:
+        source = plugins.get("motion_source", spec.motions.name).build(resolved.params.get("motions"))
+    else:
+        source = plugins.get("motion_source", motions).build({})
+    lib = MotionLibrary(source.load(skeleton), skeleton)
+    imitator = plugins.get("imitator", spec.imitator.name).build(
+        resolved.params.get("imitator"), skeleton=skeleton, checkpoint=target.imitator_checkpoint, device=device
+    )
+    latent, label, policy = None, "policy_output", imitator
+    if use_latent and target.latent_checkpoint is not None:
+        latent = plugins.get("latent", spec.latent.name).build(
+            resolved.params.get("latent"), skeleton=skeleton, checkpoint=target.latent_checkpoint, device=device
+        )
+        label = str(load_latent_state(target.latent_checkpoint)["extra"].get("label", "policy_output"))
+        policy = latent_imitator(PDTargetTeacher(imitator) if label == "pd_targets" else imitator, latent)
+    sim_component = plugins.get("simulator", spec.simulator.name)
+    sim_params = resolved.params.get("simulator")
+
+    def make_sim(n: int) -> Simulator:
+        return sim_component.build(sim_params, skeleton=skeleton, num_envs=n, seed=spec.seed)
+
+    return LoadedTarget(target, skeleton, lib, imitator, latent, label, policy, make_sim)
 
 
 @hookimpl
 def register_commands(app):  # type: ignore[no-untyped-def]
     @app.command("eval")
     def eval_command(
-        target: Annotated[Path, typer.Argument(help="an imitator checkpoint (policy.pt) or a run directory")],
+        target: Annotated[
+            Path, typer.Argument(help="a checkpoint (policy.pt, latent.pt), a checkpoint directory (checkpoints/<name>), a run directory or a spec")
+        ],
         motions: Annotated[
             Optional[str], typer.Option("--motions", help="evaluate on this motion source instead of the training one (default params)")
         ] = None,
@@ -368,8 +572,11 @@ def register_commands(app):  # type: ignore[no-untyped-def]
             Optional[float], typer.Option("--loop", help="robustness protocol: looping clips keep cycling for this many seconds")
         ] = None,
         num_envs: Annotated[int, typer.Option(help="clips simulated in parallel")] = 64,
+        imitator_only: Annotated[
+            bool, typer.Option("--imitator-only", help="for a latent space: evaluate the imitator it was distilled from instead")
+        ] = False,
     ) -> None:
-        """Evaluate an imitator with the imitation protocol (each clip from its first frame, deterministic)."""
+        """Evaluate an imitator or a latent space with the imitation protocol (each clip from its first frame, deterministic)."""
         import json
 
         from rich.console import Console
@@ -379,30 +586,19 @@ def register_commands(app):  # type: ignore[no-untyped-def]
 
         console = Console(stderr=True)
         plugins = get_plugins()
-        resolved, checkpoint = load_evaluation_target(target, plugins)
-        spec = resolved.spec
-        skeleton = plugins.get("humanoid", spec.humanoid.name).build(resolved.params.get("humanoid"))
-        if motions is None:
-            source = plugins.get("motion_source", spec.motions.name).build(resolved.params.get("motions"))
-        else:
-            source = plugins.get("motion_source", motions).build({})
-        motion_set = source.load(skeleton)
-        lib = MotionLibrary(motion_set, skeleton)
-        imitator = plugins.get("imitator", spec.imitator.name).build(
-            resolved.params.get("imitator"), skeleton=skeleton, checkpoint=checkpoint, device="cpu"
-        )
-        sim_component = plugins.get("simulator", spec.simulator.name)
-        sim_params = resolved.params.get("simulator")
-
-        def make_sim(n: int) -> Simulator:
-            return sim_component.build(sim_params, skeleton=skeleton, num_envs=n, seed=spec.seed)
+        target_info = load_evaluation_target(target, plugins)
+        loaded = build_evaluation_target(target_info, plugins, motions=motions, use_latent=not imitator_only)
+        spec, lib, imitator, make_sim = target_info.spec, loaded.library, loaded.policy, loaded.make_sim
+        what = f"{spec.latent.name} latent (z = encoder mean)" if loaded.latent is not None else spec.imitator.name
+        checkpoint = target_info.latent_checkpoint if loaded.latent is not None else target_info.imitator_checkpoint
 
         params = ImitationEvalParams(num_envs=num_envs, horizon=loop, video=False)
         table = evaluate_imitator(imitator, lib, make_sim, params, default_metrics(), console)
         table["checkpoint"] = str(checkpoint) if checkpoint else None
+        table["evaluated"] = what
         units = table["units"]
         cols = [c for c in units if c != "success"]
-        out = Table(title=f"{spec.imitator.name} on {len(lib.clip_names)} clips ({table['horizon']})")
+        out = Table(title=f"{what} on {len(lib.clip_names)} clips ({table['horizon']})")
         for col in ["clip", "success", "tracked s", *[f"{c} ({units[c]})" for c in cols]]:
             out.add_column(col, justify="left" if col == "clip" else "right")
         for name, row in table["clips"].items():
@@ -413,6 +609,12 @@ def register_commands(app):  # type: ignore[no-untyped-def]
         stdout = Console(width=None if sys.stdout.isatty() else 160)
         stdout.print(out)
         stdout.print(f"success rate {100 * agg['success_rate']:.1f}% ({agg['succeeded']}/{agg['total']}); {PROTOCOL}")
+        if loaded.latent is not None:
+            # PULSE Table 1 layout: the latent next to the imitator it was distilled from.
+            teacher = evaluate_imitator(loaded.imitator, lib, make_sim, params, default_metrics(), console)
+            table["imitator"] = teacher
+            table["comparison"] = compare_tables(teacher, table)
+            stdout.print(render_comparison({spec.imitator.name + " (teacher)": teacher, what: table}, table["comparison"], console_table=True))
         if json_out is not None:
             json_out.parent.mkdir(parents=True, exist_ok=True)
             json_out.write_text(json.dumps(table, indent=2) + "\n")

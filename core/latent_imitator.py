@@ -84,6 +84,34 @@ class LatentImitator(Imitator):
         return self.to_pd_targets(obs, self.policy_output(obs, deterministic))
 
 
+class PDTargetTeacher(Imitator):
+    """A teacher whose "policy output" is its PD targets (and whose mapping is the identity).
+
+    With it, a student learns PD targets directly, so its decoder drives the simulator without the
+    reference motion (the ``label: pd_targets`` switch of :class:`DistillParams`).
+    """
+
+    def __init__(self, imitator: Imitator):
+        self.imitator = imitator
+
+    @property
+    def policy(self) -> Any:
+        """The wrapped imitator's policy network (students may copy its input statistics)."""
+        return getattr(self.imitator, "policy", None)
+
+    def observe(self, state: Any, reference: Any) -> Any:
+        return self.imitator.observe(state, reference)
+
+    def act(self, obs: Any, deterministic: bool = True) -> Tensor:
+        return self.imitator.act(obs, deterministic)
+
+    def policy_output(self, obs: Any, deterministic: bool = True) -> Tensor:
+        return self.imitator.act(obs, deterministic)
+
+    def to_pd_targets(self, obs: Any, output: Tensor) -> Tensor:
+        return output
+
+
 def latent_imitator(imitator: Any, latent: Any, device: torch.device | str | None = None) -> LatentImitator:
     """Convenience: ``LatentImitator(imitator, latent, device)`` with the latent in eval mode."""
     if hasattr(latent, "eval"):
@@ -91,4 +119,4 @@ def latent_imitator(imitator: Any, latent: Any, device: torch.device | str | Non
     return LatentImitator(imitator, latent, device)
 
 
-__all__ = ["LatentImitator", "latent_imitator", "observations_to"]
+__all__ = ["LatentImitator", "PDTargetTeacher", "latent_imitator", "observations_to"]

@@ -483,6 +483,22 @@ class HybridLatent(LatentSpace):
         codes = self.sample_task_action(p.shape[0], n_active, generator=generator, device=p.device)
         return self._compose(p, codes)
 
+    def random_action(
+        self, obs: Observations, noise_scale: float = 1.0, generator: torch.Generator | None = None, n_active: int | None = None
+    ) -> Tensor:
+        """(N, A) decoder output of an unconditional-generation step: :meth:`generate`'s latent
+        (uniformly random codes of the first ``n_active`` levels, plus z_p for the hybrid; the
+        continuous baseline samples N(μ_p, (noise_scale σ_p)²))."""
+        p, _ = self._norm(obs)
+        if self.variant == "continuous":
+            mu, log_std = self._prior_out(p)
+            assert log_std is not None
+            eps = torch.randn(mu.shape, generator=generator, device=mu.device if generator is None else generator.device, dtype=mu.dtype)
+            z = mu + noise_scale * log_std.exp() * eps.to(mu.device)
+        else:
+            z = self.generate(obs, n_active, generator=generator)
+        return self._decode(p, z)
+
     # -------------------------------------------------------------------- DistillableLatent
     def student_action(self, obs: Observations, sample: bool = True) -> Tensor:
         """(N, A) decoder mean at the posterior latent. Rollouts use the full quantizer depth and

@@ -1,0 +1,401 @@
+"""Random generation from a latent space's prior, and its metrics (``mocap generate``, trainer ``generation_eval``).
+
+Neither PULSE nor the hybrid-RVQ paper defines one protocol (digest pulse §6.3: "only qualitative";
+hybrid_rvq §6.2: motion-matching distance, filtered share and coverage). This module measures both
+kinds on the same rollouts:
+
+* **Rollouts.** ``num_rollouts`` envs start from reference states of the motion library (clip and
+  time drawn with the library's weights), skipping starts where a non-foot body origin is below
+  ``start_min_height`` (lying down is already a fall). Each control step the latent space draws an
+  action from its prior with no reference motion at all: the observation is the imitator's
+  proprioception only (the goal is dropped), and the latent's ``random_action(obs, noise_scale,
+  generator)`` (PULSE: ``z = μ_p + noise·σ_p·ε``; hybrid: uniformly random codes [+ prior]) is
+  decoded into PD targets. That needs a decoder that outputs PD targets (distilled with
+  ``label: pd_targets``) or a teacher whose actions need no reference (PHC ``action: absolute``);
+  a residual teacher is refused.
+* **Falls.** A rollout has fallen at the first step at which a body other than the feet touches
+  the ground *and* is below ``fall_height`` (PULSE's code: contact and height < 0.15 m).
+  Rollouts go on after a fall (getting up counts); ``fall_rate`` is the share that fell at least
+  once, ``time_to_fall_s`` the mean time of the first fall over those that fell,
+  ``survival_s`` the same with non-fallen rollouts counted at the horizon, ``down_at_end`` the
+  share that is fallen at the last step.
+* **Diversity** (APD-style): the mean over rollout pairs of the mean over steps and bodies of the
+  distance between their body positions, each trajectory first expressed in its own start frame
+  (start root position on the ground and heading removed), so that where and which way a rollout
+  started does not count as diversity.
+* **Motion matching** (hybrid_rvq Eq. 8): each generated transition ``(s_{t-1}, s_t)`` of
+  proprioceptive states is matched to its nearest dataset transition (the library's frames at the
+  control rate), features standardized by the dataset's mean and std; ``match_distance`` is the
+  mean squared distance over the kept transitions; a transition is *filtered* when its distance per
+  feature dimension exceeds ``filter_threshold`` (the paper gives no value: [DEFAULT] ours);
+  ``coverage`` is the share of dataset transitions that are the nearest neighbour of at least one
+  kept generated transition.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Annotated, Any, Callable, Optional
+
+import torch
+import typer
+from pydantic import BaseModel, ConfigDict, Field
+from torch import Tensor
+
+from mocap.hooks import hookimpl
+from mocap.interfaces import Imitator, Simulator
+from mocap.motion.library import MotionLibrary
+from mocap.observations import proprioception
+from mocap.rotations import heading_quat, quat_apply, quat_conjugate
+from mocap.state import Observations
+from mocap.termination import allowed_contact_mask
+
+
+class GenerationParams(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    num_rollouts: int = Field(64, ge=2, description="rollouts (all simulated in parallel)")
+    seconds: float = Field(10.0, gt=0, description="length of each rollout, s")
+    noise_scale: float = Field(1.0, ge=0, description="scale of the prior noise (PULSE: σ_p multiplier; 0 = prior mean)")
+    fall_height: float = Field(0.15, gt=0, description="a non-foot body touching the ground below this height is a fall, m ([CODE] PULSE 0.15)")
+    start_min_height: float = Field(0.25, ge=0, description="skip start frames with a non-foot body origin below this, m")
+    filter_threshold: float = Field(
+        1.0, gt=0, description="motion matching: a transition is filtered when its squared distance per feature exceeds this ([DEFAULT]; not in the paper)"
+    )
+    seed: int = Field(0, description="seed of the start states and the prior noise")
+    video_rollouts: int = Field(4, ge=0, description="rollouts recorded one after another in the video (0: none)")
+    video_seconds: float = Field(5.0, gt=0, description="seconds of each recorded rollout")
+
+
+def heading_frame(root_pos: Tensor, root_rot: Tensor) -> tuple[Tensor, Tensor]:
+    """(origin (N, 3) on the ground below the root, yaw-only rotation (N, 4) wxyz) of each root."""
+    q = heading_quat(root_rot)
+    origin = torch.cat([root_pos[..., :2], torch.zeros_like(root_pos[..., 2:])], -1)
+    return origin, q
+
+
+def in_start_frame(body_pos: Tensor, origin: Tensor, heading: Tensor) -> Tensor:
+    """(T, N, B, 3) body positions expressed in each rollout's start frame (origin, heading (N, ...))."""
+    T, N, B, _ = body_pos.shape
+    rel = body_pos - origin[None, :, None, :]
+    q = quat_conjugate(heading)[None, :, None, :].expand(T, N, B, 4)
+    return quat_apply(q, rel)
+
+
+def pairwise_diversity(traj: Tensor) -> float:
+    """Mean over pairs i < j of mean_{t,b} ‖traj[t, i, b] − traj[t, j, b]‖ for (T, N, B, 3) trajectories."""
+    T, N, B, _ = traj.shape
+    if N < 2:
+        return float("nan")
+    x = traj.permute(1, 0, 2, 3).reshape(N, T * B, 3)
+    total, pairs = 0.0, 0
+    for i in range(N - 1):
+        d = torch.linalg.vector_norm(x[i + 1 :] - x[i], dim=-1).mean(-1)  # (N - i - 1,)
+        total += float(d.sum())
+        pairs += d.numel()
+    return total / pairs
+
+
+def motion_matching(generated: Tensor, dataset: Tensor, threshold: float, chunk: int = 4096) -> dict[str, float]:
+    """hybrid_rvq Eq. 8 on transition features (module docstring).
+
+    Args:
+        generated: (M, F) generated transitions; dataset: (K, F) dataset transitions (unnormalized).
+        threshold: filter threshold on the squared distance divided by F.
+    """
+    mean, std = dataset.mean(0), dataset.std(0).clamp_min(1e-6)
+    g, d = (generated - mean) / std, (dataset - mean) / std
+    best = torch.empty(len(g))
+    idx = torch.empty(len(g), dtype=torch.long)
+    for s in range(0, len(g), chunk):
+        dist = torch.cdist(g[s : s + chunk], d).pow(2)
+        best[s : s + chunk], idx[s : s + chunk] = dist.min(-1)
+    keep = best / g.shape[1] <= threshold
+    covered = torch.zeros(len(d), dtype=torch.bool)
+    covered[idx[keep]] = True
+    return {
+        "match_distance": float(best[keep].mean()) if bool(keep.any()) else float("nan"),
+        "match_distance_std": float(best[keep].std()) if int(keep.sum()) > 1 else float("nan"),
+        "filtered": float(1.0 - keep.double().mean()),
+        "coverage": float(covered.double().mean()),
+        "dataset_transitions": int(len(d)),
+        "generated_transitions": int(len(g)),
+    }
+
+
+def dataset_transitions(lib: MotionLibrary, dt: float, sixd: str = "zhou") -> Tensor:
+    """(K, 2P) proprioception pairs (s_{t-1}, s_t) of every clip sampled at the control rate."""
+    rows = []
+    for c in range(lib.num_clips):
+        n = int(math.floor(float(lib.durations[c]) / dt + 1e-6)) + 1
+        if n < 2:
+            continue
+        ids = torch.full((n,), c, dtype=torch.long, device=lib.device)
+        times = torch.arange(n, dtype=torch.float64, device=lib.device) * dt
+        feat = proprioception(lib.frames(ids, times), sixd).float().cpu()
+        rows.append(torch.cat([feat[:-1], feat[1:]], -1))
+    return torch.cat(rows)
+
+
+def start_states(lib: MotionLibrary, n: int, skeleton: Any, min_height: float, generator: torch.Generator) -> tuple[Tensor, Tensor]:
+    """``n`` (clip id, time) pairs drawn with the library's weights whose frames have every non-foot body above ``min_height``."""
+    allowed = allowed_contact_mask(skeleton).cpu()
+    ids_out, t_out = [], []
+    have = 0
+    for _ in range(100):
+        ids, times = lib.sample(4 * n, generator=generator)
+        frames = lib.frames(ids, times)
+        low = (frames.body_pos[..., 2].cpu() < min_height) & ~allowed
+        ok = ~low.any(-1)
+        ids_out.append(ids[ok.to(ids.device)])
+        t_out.append(times[ok.to(times.device)])
+        have += int(ok.sum())
+        if have >= n:
+            break
+    if have < n:
+        raise ValueError(f"fewer than {n} start frames with every non-foot body above {min_height} m in the motion library")
+    return torch.cat(ids_out)[:n], torch.cat(t_out)[:n]
+
+
+def _reference_free(obs: Observations) -> Observations:
+    """The observation a generation rollout gives the latent: proprioception only."""
+    return Observations(proprio=obs.proprio, goal=None, extra={})
+
+
+def evaluate_generation(
+    latent: Any,
+    imitator: Imitator,
+    to_pd_targets: Callable[[Observations, Tensor], Tensor],
+    lib: MotionLibrary,
+    make_sim: Callable[[int], Simulator],
+    params: GenerationParams,
+    *,
+    video: Path | None = None,
+    console: Any = None,
+) -> dict[str, Any]:
+    """Roll out ``latent.random_action`` from the prior and measure falls, diversity and motion matching.
+
+    ``imitator.observe`` supplies the proprioception (its goal is dropped); ``to_pd_targets`` maps a
+    decoder output to PD targets without a reference (see the module docstring).
+    """
+    if not callable(getattr(latent, "random_action", None)):
+        raise ValueError(f"{type(latent).__name__} cannot generate: it has no random_action(obs, noise_scale, generator)")
+    p = params
+    gen = torch.Generator().manual_seed(p.seed)
+    sim = make_sim(p.num_rollouts)
+    skeleton = sim.skeleton
+    ids, times = start_states(lib, p.num_rollouts, skeleton, p.start_min_height, gen)
+    ref = lib.frames(ids, times)
+    sim.reset(torch.arange(p.num_rollouts), ref)
+    state = sim.state
+    steps = max(1, int(round(p.seconds / sim.dt)))
+    allowed = allowed_contact_mask(skeleton).to(state.body_pos.device)
+    origin, heading = heading_frame(state.root_pos.float().cpu(), state.root_rot.float().cpu())
+    body = torch.zeros(steps + 1, p.num_rollouts, skeleton.num_bodies, 3)
+    props = []
+    body[0] = state.body_pos.float().cpu()
+    first_fall = torch.full((p.num_rollouts,), -1, dtype=torch.long)
+    down = torch.zeros(p.num_rollouts, dtype=torch.bool)
+    unstable = torch.zeros(p.num_rollouts, dtype=torch.bool)
+    recorder = None
+    if video is not None and p.video_rollouts > 0 and hasattr(sim, "make_recorder"):
+        recorder = sim.make_recorder()
+    rec_steps = min(steps, int(round(p.video_seconds / sim.dt)))
+    frames_by_env: list[list[Any]] = [[] for _ in range(min(p.video_rollouts, p.num_rollouts))]
+    from rich.progress import Progress
+
+    with Progress(transient=True, console=console, disable=console is None) as bar:
+        task = bar.add_task("generation", total=steps)
+        for k in range(1, steps + 1):
+            obs = _reference_free(imitator.observe(state, ref))
+            props.append(obs.proprio.float().cpu())
+            with torch.no_grad():
+                out = latent.random_action(obs, noise_scale=p.noise_scale, generator=gen)
+                try:
+                    targets = to_pd_targets(obs, out)
+                except ValueError as exc:
+                    raise ValueError(
+                        f"generation needs PD targets without a reference motion ({exc}); distill the latent with "
+                        "label: pd_targets or use an imitator with absolute actions"
+                    ) from None
+            state = sim.step(targets)
+            body[k] = state.body_pos.float().cpu()
+            below = state.body_pos[..., 2] < p.fall_height
+            down = (state.body_contact & ~allowed & below).any(-1).cpu()
+            first_fall = torch.where((first_fall < 0) & down, torch.full_like(first_fall, k), first_fall)
+            if state.unstable.numel():
+                unstable |= state.unstable.cpu()
+            if recorder is not None and k <= rec_steps:
+                for e in range(len(frames_by_env)):
+                    frames_by_env[e].append((state.root_pos[e].cpu(), state.root_rot[e].cpu(), state.dof_pos[e].cpu()))
+            bar.advance(task)
+    obs = _reference_free(imitator.observe(state, ref))
+    props.append(obs.proprio.float().cpu())
+    sim.close()
+    dt = sim.dt
+    fell = first_fall >= 0
+    fall_times = first_fall[fell].double() * dt
+    horizon = steps * dt
+    survival = torch.where(fell, first_fall.double() * dt, torch.full_like(first_fall, 0, dtype=torch.float64) + horizon)
+    traj = in_start_frame(body, origin, heading)
+    prop = torch.stack(props)  # (T + 1, N, P)
+    gen_trans = torch.cat([prop[:-1], prop[1:]], -1).reshape(-1, 2 * prop.shape[-1])
+    sixd = getattr(getattr(imitator, "observation", None), "sixd", "zhou")
+    matching = motion_matching(gen_trans, dataset_transitions(lib, dt, sixd), p.filter_threshold)
+    result: dict[str, Any] = {
+        "protocol": "mocap-generation-v1 (prior rollouts from library start states; see mocap.generation)",
+        "params": p.model_dump(),
+        "num_rollouts": p.num_rollouts,
+        "seconds": horizon,
+        "fall_rate": float(fell.double().mean()),
+        "time_to_fall_s": float(fall_times.mean()) if bool(fell.any()) else float("nan"),
+        "survival_s": float(survival.mean()),
+        "down_at_end": float(down.double().mean()),
+        "unstable": int(unstable.sum()),
+        "diversity_m": pairwise_diversity(traj),
+        **matching,
+        "start_clips": [lib.clip_names[int(i)] for i in ids],
+    }
+    if recorder is not None:
+        for frames in frames_by_env:
+            for pose in frames:
+                recorder.add_frame(pose)
+        recorder.save(video)
+        result["video"] = str(video)
+    return result
+
+
+# ------------------------------------------------------------------------------ registration
+class GenerationEval:
+    """Trainer ``generation_eval``: :func:`evaluate_generation` of the spec's trained latent space;
+    publishes ``generation.json`` / ``generation.md`` (and ``generation.mp4``) in the run directory."""
+
+    def __init__(self, params: GenerationParams):
+        self.params = params
+
+    def run(self, ctx: Any) -> Any:
+        from mocap.checkpoint import atomic_write_json, atomic_write_text
+        from mocap.distill import load_latent_state
+        from mocap.interfaces import StageResult
+        from mocap.pipeline import StageFailed
+
+        latent_stage = ctx.upstream.get("latent")
+        if latent_stage is None or latent_stage.checkpoint is None:
+            raise StageFailed("generation_eval needs a trained latent stage")
+        upstream = ctx.upstream.get("imitator")
+        imitator = ctx.stage_component("imitator", checkpoint=upstream.checkpoint if upstream else None)
+        latent = ctx.stage_component("latent", checkpoint=latent_stage.checkpoint)
+        if hasattr(latent, "eval"):
+            latent.eval()
+        label = load_latent_state(latent_stage.checkpoint)["extra"].get("label", "policy_output")
+        skeleton = ctx.skeleton
+        lib = MotionLibrary(ctx.build("motions").load(skeleton), skeleton)
+
+        def make_sim(n: int) -> Simulator:
+            return ctx.build("simulator", skeleton=skeleton, num_envs=n, seed=ctx.seed)
+
+        mapping = (lambda obs, out: out) if label == "pd_targets" else imitator.to_pd_targets
+        try:
+            result = evaluate_generation(latent, imitator, mapping, lib, make_sim, self.params, video=ctx.publish("generation.mp4"), console=ctx.console)
+        except ValueError as exc:
+            raise StageFailed(f"generation_eval: {exc}") from None
+        atomic_write_json(ctx.publish("generation.json"), result)
+        atomic_write_text(ctx.publish("generation.md"), render_generation({ctx.spec.latent.name: result}))
+        numeric = {k: float(v) for k, v in result.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
+        ctx.log.log(0, **numeric)
+        return StageResult(checkpoint=None, metrics=numeric)
+
+
+GENERATION_COLUMNS = (
+    ("fall_rate", "share"),
+    ("time_to_fall_s", "s"),
+    ("survival_s", "s"),
+    ("diversity_m", "m"),
+    ("match_distance", ""),
+    ("filtered", "share"),
+    ("coverage", "share"),
+)
+
+
+def render_generation(results: dict[str, dict[str, Any]]) -> str:
+    """A markdown table, one row per latent space."""
+    head = ["latent", *[f"{c} ({u})" if u else c for c, u in GENERATION_COLUMNS]]
+    lines = [
+        "# Random generation from the prior",
+        "",
+        "| " + " | ".join(head) + " |",
+        "|" + "---|" * len(head),
+    ]
+    for name, r in results.items():
+        lines.append("| " + " | ".join([name, *[f"{r[c]:.3g}" for c, _ in GENERATION_COLUMNS]]) + " |")
+    any_r = next(iter(results.values()))
+    lines += ["", f"{any_r['num_rollouts']} rollouts of {any_r['seconds']:.3g} s; {any_r['protocol']}", ""]
+    return "\n".join(lines)
+
+
+@hookimpl
+def register_trainers(register):  # type: ignore[no-untyped-def]
+    register(
+        "generation_eval",
+        GenerationEval,
+        params=GenerationParams,
+        description="random generation from a trained latent space's prior: falls, diversity, motion matching, video",
+    )
+
+
+@hookimpl
+def register_commands(app):  # type: ignore[no-untyped-def]
+    @app.command("generate")
+    def generate_command(
+        target: Annotated[Path, typer.Argument(help="a latent checkpoint (latent.pt), a checkpoint directory, a run directory or a spec")],
+        rollouts: Annotated[int, typer.Option("--rollouts", help="rollouts simulated in parallel")] = 64,
+        seconds: Annotated[float, typer.Option("--seconds", help="length of each rollout, s")] = 10.0,
+        noise: Annotated[float, typer.Option("--noise", help="prior noise scale")] = 1.0,
+        seed: Annotated[int, typer.Option("--seed")] = 0,
+        json_out: Annotated[Optional[Path], typer.Option("--json", help="write the metrics as JSON")] = None,
+        video: Annotated[Optional[Path], typer.Option("--video", help="write a video of the first rollouts (mp4 or gif)")] = None,
+    ) -> None:
+        """Roll out random motion from a latent space's prior and report falls, diversity and motion matching."""
+        import json
+
+        from rich.console import Console
+
+        from mocap.cli import UserError
+        from mocap.evaluation import build_evaluation_target, load_evaluation_target
+        from mocap.plugins import get_plugins
+
+        console = Console(stderr=True)
+        plugins = get_plugins()
+        target_info = load_evaluation_target(target, plugins)
+        if target_info.latent_checkpoint is None:
+            raise UserError(f"{target}: not a latent space (generation samples a latent space's prior)")
+        loaded = build_evaluation_target(target_info, plugins)
+        params = GenerationParams(num_rollouts=rollouts, seconds=seconds, noise_scale=noise, seed=seed)
+        try:
+            result = evaluate_generation(
+                loaded.latent, loaded.imitator, loaded.to_pd_targets, loaded.library, loaded.make_sim, params, video=video, console=console
+            )
+        except ValueError as exc:
+            raise UserError(str(exc)) from None
+        result["checkpoint"] = str(target_info.latent_checkpoint)
+        print(render_generation({target_info.spec.latent.name: result}))
+        if json_out is not None:
+            json_out.parent.mkdir(parents=True, exist_ok=True)
+            json_out.write_text(json.dumps(result, indent=2) + "\n")
+            console.print(f"wrote {json_out}")
+        if result.get("video"):
+            console.print(f"video: {result['video']}")
+
+
+__all__ = [
+    "GenerationEval",
+    "GenerationParams",
+    "render_generation",
+    "dataset_transitions",
+    "evaluate_generation",
+    "heading_frame",
+    "in_start_frame",
+    "motion_matching",
+    "pairwise_diversity",
+    "start_states",
+]

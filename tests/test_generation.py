@@ -1,0 +1,193 @@
+"""Random generation (``mocap.generation``, ``mocap generate``) and the evaluation of latent spaces
+(``mocap eval`` of a latent run, checkpoint directory or latent file)."""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import shutil
+from pathlib import Path
+
+import pytest
+import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from rich.console import Console
+from test_distill import teacher_file, walk  # noqa: F401  (fixtures)
+
+from mocap.generation import GenerationParams, evaluate_generation, heading_frame, in_start_frame, motion_matching, pairwise_diversity
+from mocap.rotations import quat_apply, quat_from_axis_angle, quat_mul
+from mocap.testing import invoke
+
+floats = st.floats(-3.0, 3.0, allow_nan=False, width=32)
+
+
+# --------------------------------------------------------------------------------- properties
+@settings(max_examples=40, deadline=None)
+@given(st.integers(2, 5), st.integers(1, 4), st.integers(1, 3), st.integers(0, 2**31 - 1))
+def test_diversity_is_zero_for_copies_and_symmetric(n, t, b, seed):
+    g = torch.Generator().manual_seed(seed)
+    one = torch.randn(t, 1, b, 3, generator=g, dtype=torch.float64)
+    assert pairwise_diversity(one.expand(t, n, b, 3)) == pytest.approx(0.0, abs=1e-12)
+    many = torch.randn(t, n, b, 3, generator=g, dtype=torch.float64)
+    perm = torch.randperm(n, generator=g)
+    assert pairwise_diversity(many[:, perm]) == pytest.approx(pairwise_diversity(many), rel=1e-9)
+    assert pairwise_diversity(many) > 0
+
+
+@settings(max_examples=40, deadline=None)
+@given(floats, floats, floats)
+def test_diversity_of_two_shifted_copies_is_the_shift(x, y, z):
+    base = torch.randn(3, 1, 4, 3, dtype=torch.float64)
+    shift = torch.tensor([x, y, z], dtype=torch.float64)
+    pair = torch.cat([base, base + shift], 1)
+    assert pairwise_diversity(pair) == pytest.approx(float(torch.linalg.vector_norm(shift)), rel=1e-6, abs=1e-9)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.floats(-math.pi, math.pi), floats, floats, st.integers(0, 2**31 - 1))
+def test_start_frame_removes_where_and_which_way_a_rollout_started(yaw, dx, dy, seed):
+    """Moving and turning a whole rollout about the vertical does not change it in its start frame."""
+    g = torch.Generator().manual_seed(seed)
+    T, N, B = 3, 2, 4
+    body = torch.randn(T, N, B, 3, generator=g, dtype=torch.float64)
+    root_pos = torch.randn(N, 3, generator=g, dtype=torch.float64)
+    root_rot = torch.nn.functional.normalize(torch.randn(N, 4, generator=g, dtype=torch.float64), dim=-1)
+    turn = quat_from_axis_angle(torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64), torch.tensor(yaw, dtype=torch.float64))
+    move = torch.tensor([dx, dy, 0.0], dtype=torch.float64)
+    a = in_start_frame(body, *heading_frame(root_pos, root_rot))
+    body2 = quat_apply(turn.expand(T, N, B, 4), body) + move
+    root_pos2 = quat_apply(turn.expand(N, 4), root_pos) + move
+    root_rot2 = quat_mul(turn.expand(N, 4), root_rot)
+    b = in_start_frame(body2, *heading_frame(root_pos2, root_rot2))
+    assert torch.allclose(a, b, atol=1e-8)
+    origin, _ = heading_frame(root_pos, root_rot)
+    assert torch.all(origin[:, 2] == 0)
+
+
+def test_motion_matching_zero_on_the_dataset_and_filters_outliers():
+    g = torch.Generator().manual_seed(0)
+    data = torch.randn(50, 6, generator=g)
+    out = motion_matching(data[:10], data, threshold=1.0)
+    assert out["match_distance"] == pytest.approx(0.0, abs=1e-5) and out["filtered"] == 0.0
+    assert out["coverage"] == pytest.approx(10 / 50)
+    far = data[:4] + 100.0
+    mixed = motion_matching(torch.cat([data[:4], far]), data, threshold=1.0)
+    assert mixed["filtered"] == pytest.approx(0.5) and mixed["coverage"] == pytest.approx(4 / 50)
+    assert motion_matching(far, data, threshold=1.0)["coverage"] == 0.0
+
+
+# ------------------------------------------------------------------------------ end to end
+def _spec(teacher: Path, latent: str = "pulse", label: str = "pd_targets") -> str:
+    params = (
+        "{latent_dim: 4, encoder_hidden: [16], prior_hidden: [16], decoder_hidden: [16]}"
+        if latent == "pulse"
+        else "{latent_dim: 4, num_codebooks: 2, codebook_size: 8, encoder_hidden: [16], prior_hidden: [16], decoder_hidden: [16], codebook_init: random}"
+    )
+    return f"""\
+spec_version: 1
+name: gen_tiny
+device: cpu
+humanoid: {{name: amp}}
+motions: {{name: deepmimic, params: {{clips: [walk]}}}}
+simulator: {{name: mujoco}}
+imitator: {{name: phc, params: {{action: residual}}, checkpoint: {teacher}}}
+latent:
+  name: {latent}
+  params: {params}
+  trainer: {{name: distill, params: {{num_envs: 2, horizon: 4, total_env_steps: 16, minibatch_envs: 2, eval_every: 0, act_with: teacher, label: {label}}}}}
+eval:
+  trainer: {{name: generation_eval, params: {{num_rollouts: 3, seconds: 0.3, video_rollouts: 0}}}}
+"""
+
+
+@pytest.fixture(scope="module")
+def pulse_run(teacher_file, tmp_path_factory):  # noqa: F811
+    root = tmp_path_factory.mktemp("genrun")
+    spec = root / "spec.yaml"
+    spec.write_text(_spec(teacher_file))
+    result = invoke(["run", spec, "--out", root / "runs" / "tiny"])
+    assert result.exit_code == 0, result.output
+    return root / "runs" / "tiny"
+
+
+def test_generation_stage_and_command(pulse_run, tmp_path):
+    table = json.loads((pulse_run / "generation.json").read_text())
+    for key in ("fall_rate", "time_to_fall_s", "survival_s", "diversity_m", "match_distance", "filtered", "coverage"):
+        assert key in table, key
+    assert 0.0 <= table["fall_rate"] <= 1.0 and 0.0 <= table["coverage"] <= 1.0 and table["num_rollouts"] == 3
+    assert 0.0 < table["survival_s"] <= table["seconds"] + 1e-9 and table["diversity_m"] > 0
+    assert "Random generation" in (pulse_run / "generation.md").read_text()
+    out = tmp_path / "g.json"
+    result = invoke(["generate", pulse_run, "--rollouts", "2", "--seconds", "0.2", "--json", out])
+    assert result.exit_code == 0, result.output
+    assert json.loads(out.read_text())["num_rollouts"] == 2 and "fall_rate" in result.stdout
+
+
+def test_eval_of_a_latent_run_compares_it_with_its_teacher(pulse_run, tmp_path):
+    out = tmp_path / "e.json"
+    result = invoke(["eval", pulse_run, "--json", out])
+    assert result.exit_code == 0, result.output
+    table = json.loads(out.read_text())
+    assert table["evaluated"].startswith("pulse latent") and "imitator" in table
+    comp = table["comparison"]
+    assert set(comp["both_succeeded"]) <= set(comp["teacher_succeeded"])
+    assert comp["mpjpe_g_ratio_all"] == pytest.approx(table["aggregate"]["mpjpe_g"] / table["imitator"]["aggregate"]["mpjpe_g"])
+    teacher_only = invoke(["eval", pulse_run, "--imitator-only", "--json", tmp_path / "t.json"])
+    assert teacher_only.exit_code == 0, teacher_only.output
+    assert json.loads((tmp_path / "t.json").read_text())["aggregate"]["mpjpe_g"] == pytest.approx(table["imitator"]["aggregate"]["mpjpe_g"])
+
+
+def test_checkpoint_directory_with_relative_paths(pulse_run, teacher_file, tmp_path):  # noqa: F811
+    """A committed ``checkpoints/<name>/``: latent.pt + spec.yaml naming the teacher by a relative path."""
+    stages = {s["stage"]: s for s in json.loads((pulse_run / "stages.json").read_text())}
+    ckdir = tmp_path / "checkpoints" / "pulse_tiny"
+    ckdir.mkdir(parents=True)
+    shutil.copy(stages["latent"]["checkpoint"], ckdir / "latent.pt")
+    (tmp_path / "checkpoints" / "teacher").mkdir()
+    shutil.copy(teacher_file, tmp_path / "checkpoints" / "teacher" / "policy.pt")
+    spec = _spec(Path("../teacher/policy.pt")).replace("  trainer: {name: distill", "  checkpoint: latent.pt\n  _drop: {name: distill")
+    spec = "\n".join(line for line in spec.splitlines() if "_drop" not in line) + "\n"
+    (ckdir / "spec.yaml").write_text(spec)
+    result = invoke(["eval", ckdir, "--json", tmp_path / "e.json"])
+    assert result.exit_code == 0, result.output
+    assert json.loads((tmp_path / "e.json").read_text())["checkpoint"] == str((ckdir / "latent.pt").resolve())
+    (tmp_path / "checkpoints" / "teacher" / "policy.pt").unlink()
+    missing = invoke(["eval", ckdir])
+    assert missing.exit_code == 2 and "Traceback" not in missing.output and "does not exist" in missing.stderr
+
+
+def test_generation_refuses_a_reference_dependent_decoder(amp, walk, teacher_file):  # noqa: F811
+    """A latent that learned a residual teacher's raw output needs the reference to act: refused."""
+    from mocap.motion.library import MotionLibrary
+    from mocap_phc.imitator import PHCParams, make_phc
+    from mocap_pulse.latent import PulseParams, make_pulse
+    from mocap_sim_mujoco.simulator import MujocoSimulator
+
+    teacher = make_phc(PHCParams(action="residual"), skeleton=amp, checkpoint=teacher_file)
+    latent = make_pulse(PulseParams(latent_dim=4, encoder_hidden=[8], prior_hidden=[8], decoder_hidden=[8]), skeleton=amp)
+    lib = MotionLibrary(walk, amp)
+    params = GenerationParams(num_rollouts=2, seconds=0.1, video_rollouts=0)
+    make_sim = lambda n: MujocoSimulator(skeleton=amp, num_envs=n, seed=0)  # noqa: E731
+    with pytest.raises(ValueError, match="without a reference"):
+        evaluate_generation(latent, teacher, teacher.to_pd_targets, lib, make_sim, params)
+    result = evaluate_generation(latent, teacher, lambda obs, out: out, lib, make_sim, params, console=Console(file=io.StringIO()))
+    assert result["num_rollouts"] == 2 and math.isfinite(result["survival_s"])
+
+
+def test_hybrid_random_action_shapes(amp):
+    from mocap.state import Observations
+    from mocap_hybrid_rvq.model import HybridParams, make_hybrid
+
+    for variant in ("hybrid", "continuous", "discrete"):
+        latent = make_hybrid(
+            HybridParams(variant=variant, latent_dim=4, num_codebooks=2, codebook_size=8, single_codebook_size=8,
+                         encoder_hidden=[8], prior_hidden=[8], decoder_hidden=[8]),
+            skeleton=amp,
+        )
+        obs = Observations(proprio=torch.randn(3, latent.proprio_dim), goal=None, extra={})
+        g = torch.Generator().manual_seed(0)
+        a = latent.random_action(obs, generator=g)
+        b = latent.random_action(obs, generator=torch.Generator().manual_seed(0))
+        assert a.shape == (3, amp.num_dofs) and torch.equal(a, b)
