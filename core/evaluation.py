@@ -84,6 +84,9 @@ def rollout_imitation(
     T = int(frames.max().item()) + 1
     sim_pos = torch.zeros(T, n, sim.skeleton.num_bodies, 3)
     ref_pos = torch.zeros_like(sim_pos)
+    sim_rot = torch.zeros(T, n, sim.skeleton.num_bodies, 4)
+    ref_rot = torch.zeros_like(sim_rot)
+    sim_rot[0], ref_rot[0] = state.body_rot.float().cpu(), ref.body_rot.float().cpu()
     mask = torch.zeros(T, n, dtype=torch.bool)
     alive = torch.ones(n, dtype=torch.bool)
     unstable = torch.zeros(n, dtype=torch.bool)
@@ -95,6 +98,7 @@ def rollout_imitation(
         state = sim.step(actions)
         sp, rp = state.body_pos.float().cpu(), ref.body_pos.float().cpu()
         sim_pos[k], ref_pos[k] = sp, rp
+        sim_rot[k], ref_rot[k] = state.body_rot.float().cpu(), ref.body_rot.float().cpu()
         mask[k] = alive & (k <= frames)
         if state.unstable.numel():
             unstable |= state.unstable.cpu() & alive
@@ -106,8 +110,9 @@ def rollout_imitation(
             progress()
         if not bool((alive & (k < frames)).any()):
             sim_pos, ref_pos, mask = sim_pos[: k + 1], ref_pos[: k + 1], mask[: k + 1]
+            sim_rot, ref_rot = sim_rot[: k + 1], ref_rot[: k + 1]
             break
-    return Rollout(Trajectories(sim_pos, ref_pos, 1.0 / dt, mask), clip_ids, unstable)
+    return Rollout(Trajectories(sim_pos, ref_pos, 1.0 / dt, mask, sim_rot, ref_rot), clip_ids, unstable)
 
 
 def episode_frames(lib: MotionLibrary, clip_ids: torch.Tensor, dt: float, horizon: float | None) -> torch.Tensor:

@@ -12,6 +12,8 @@ PHC §6.2):
 * ``vel_err``: mean ``||(p_{t+1} - p_t)_sim - (p_{t+1} - p_t)_ref||``, mm/frame at ``fps``
   (PHC's unit; multiply by fps for mm/s).
 * ``acc_err``: mean ``||(p_{t-1} - 2 p_t + p_{t+1})_sim - (...)_ref||``, mm/frame² at ``fps``.
+* ``rot_err``: mean over bodies of the geodesic angle between the simulated and reference world
+  body orientations, degrees (needs the rotations in the trajectories; NaN without them).
 * ``success``: 1 if at no valid frame after ``grace_frames`` the mean body error exceeds
   ``threshold`` (0.5 m, PHC/PULSE evaluation), else 0. ``success_linf`` uses the max body error.
 
@@ -26,6 +28,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from torch import Tensor
 
 from mocap.interfaces import Metric
+from mocap.rotations import quat_angle_between
 from mocap.state import Trajectories
 
 PROTOCOL = "mocap-imitation-v1 (success: mean body error <= 0.5 m at every frame; mm; per-frame units at the stated fps)"
@@ -94,6 +97,15 @@ def acceleration_error(tr: Trajectories) -> Tensor:
     return 1000.0 * _masked_mean(torch.linalg.vector_norm(da, dim=-1).mean(-1), valid[2:] & valid[1:-1] & valid[:-2])
 
 
+def rotation_error(tr: Trajectories) -> Tensor:
+    """Mean over bodies of the geodesic angle between simulated and reference body orientations,
+    degrees (``2 acos |<q_sim, q_ref>|``; sign-invariant). NaN when the rotations were not recorded."""
+    if tr.sim_rot is None or tr.ref_rot is None:
+        return torch.full((tr.sim.shape[1],), float("nan"), dtype=tr.sim.dtype, device=tr.sim.device)
+    angle = torch.rad2deg(quat_angle_between(tr.sim_rot, tr.ref_rot)).mean(-1)
+    return _masked_mean(angle, tr.valid())
+
+
 def success(tr: Trajectories, threshold: float = 0.5, grace_frames: int = 0, reduce: str = "mean") -> Tensor:
     """(N,) 1.0 where the episode never exceeded ``threshold`` metres (mean or max over bodies)."""
     err = torch.linalg.vector_norm(tr.sim - tr.ref, dim=-1)
@@ -130,6 +142,7 @@ BUILTIN_METRICS = {
     "pa_mpjpe": ("mm", pa_mpjpe, "per-body error after similarity Procrustes alignment"),
     "vel_err": ("mm/frame", velocity_error, "body velocity error per frame at the evaluation fps"),
     "acc_err": ("mm/frame^2", acceleration_error, "body acceleration error per frame^2 at the evaluation fps"),
+    "rot_err": ("deg", rotation_error, "mean geodesic angle between simulated and reference body orientations"),
 }
 
 

@@ -127,12 +127,16 @@ class Trajectories:
         sim, ref: (T, N, B, 3) world body positions, m.
         fps: frames per second of the sampling.
         mask: (T, N) bool, frame t of episode n is valid (None: all valid).
+        sim_rot, ref_rot: (T, N, B, 4) world body orientations, wxyz (None: not recorded; the
+            rotation metric is then NaN).
     """
 
     sim: Tensor
     ref: Tensor
     fps: float
     mask: Tensor | None = None
+    sim_rot: Tensor | None = None
+    ref_rot: Tensor | None = None
 
     def valid(self) -> Tensor:
         T, N = self.sim.shape[:2]

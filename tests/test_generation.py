@@ -139,23 +139,34 @@ def test_eval_of_a_latent_run_compares_it_with_its_teacher(pulse_run, tmp_path):
     assert json.loads((tmp_path / "t.json").read_text())["aggregate"]["mpjpe_g"] == pytest.approx(table["imitator"]["aggregate"]["mpjpe_g"])
 
 
-def test_checkpoint_directory_with_relative_paths(pulse_run, teacher_file, tmp_path):  # noqa: F811
-    """A committed ``checkpoints/<name>/``: latent.pt + spec.yaml naming the teacher by a relative path."""
-    stages = {s["stage"]: s for s in json.loads((pulse_run / "stages.json").read_text())}
+def test_export_makes_a_self_contained_checkpoint_directory(pulse_run, teacher_file, tmp_path):  # noqa: F811
+    """``mocap export RUN DEST``: latent.pt copied, the teacher referenced by a relative path."""
+    (tmp_path / "checkpoints" / "teacher").mkdir(parents=True)
+    teacher = tmp_path / "checkpoints" / "teacher" / "policy.pt"
+    shutil.copy(teacher_file, teacher)
+    run_copy = tmp_path / "run"
+    shutil.copytree(pulse_run, run_copy)
+    stages = json.loads((run_copy / "stages.json").read_text())
+    for s in stages:  # as if the run had used the committed teacher
+        if s["stage"] == "imitator":
+            s["checkpoint"] = str(teacher)
+    (run_copy / "stages.json").write_text(json.dumps(stages))
+    spec = (run_copy / "spec.yaml").read_text().replace(str(teacher_file), str(teacher))
+    (run_copy / "spec.yaml").write_text(spec)
     ckdir = tmp_path / "checkpoints" / "pulse_tiny"
-    ckdir.mkdir(parents=True)
-    shutil.copy(stages["latent"]["checkpoint"], ckdir / "latent.pt")
-    (tmp_path / "checkpoints" / "teacher").mkdir()
-    shutil.copy(teacher_file, tmp_path / "checkpoints" / "teacher" / "policy.pt")
-    spec = _spec(Path("../teacher/policy.pt")).replace("  trainer: {name: distill", "  checkpoint: latent.pt\n  _drop: {name: distill")
-    spec = "\n".join(line for line in spec.splitlines() if "_drop" not in line) + "\n"
-    (ckdir / "spec.yaml").write_text(spec)
-    result = invoke(["eval", ckdir, "--json", tmp_path / "e.json"])
+    result = invoke(["export", run_copy, ckdir])
     assert result.exit_code == 0, result.output
-    assert json.loads((tmp_path / "e.json").read_text())["checkpoint"] == str((ckdir / "latent.pt").resolve())
-    (tmp_path / "checkpoints" / "teacher" / "policy.pt").unlink()
-    missing = invoke(["eval", ckdir])
+    assert (ckdir / "latent.pt").is_file() and not (ckdir / "policy.pt").exists()
+    assert "checkpoint: ../teacher/policy.pt" in (ckdir / "spec.yaml").read_text()
+    moved = tmp_path / "elsewhere"
+    shutil.copytree(tmp_path / "checkpoints", moved)  # relative paths survive a move of the tree
+    result = invoke(["eval", moved / "pulse_tiny", "--json", tmp_path / "e.json"])
+    assert result.exit_code == 0, result.output
+    assert json.loads((tmp_path / "e.json").read_text())["checkpoint"] == str((moved / "pulse_tiny" / "latent.pt").resolve())
+    (moved / "teacher" / "policy.pt").unlink()
+    missing = invoke(["eval", moved / "pulse_tiny"])
     assert missing.exit_code == 2 and "Traceback" not in missing.output and "does not exist" in missing.stderr
+    assert invoke(["export", tmp_path / "nothing", ckdir]).exit_code == 2
 
 
 def test_generation_refuses_a_reference_dependent_decoder(amp, walk, teacher_file):  # noqa: F811

@@ -117,3 +117,28 @@ def test_masked_frames_are_ignored_in_means():
     mask = torch.tensor([[True], [True], [True], [False]])
     assert mpjpe_global(Trajectories(sim, ref, 30.0, mask)).item() == 0.0
     assert mpjpe_global(Trajectories(sim, ref, 30.0)).item() == 2500.0
+
+
+@settings(max_examples=40, deadline=None)
+@given(seeds, st.floats(0.0, math.pi - 1e-3), st.booleans())
+def test_rotation_error_is_the_geodesic_angle(seed, angle, flip):
+    """Zero on identical orientations, blind to the quaternion sign, equal to the angle of a
+    common relative rotation, invariant to a rotation applied to both sides on the left."""
+    from mocap.metrics import rotation_error
+    from mocap.rotations import quat_from_axis_angle, quat_mul
+
+    g = torch.Generator().manual_seed(seed)
+    T, N, B = 4, 3, 5
+    ref_rot = torch.nn.functional.normalize(torch.randn(T, N, B, 4, generator=g, dtype=torch.float64), dim=-1)
+    tr = random_traj(seed, T, N, B)
+    same = Trajectories(tr.sim, tr.ref, 30.0, None, -ref_rot if flip else ref_rot, ref_rot)
+    assert torch.allclose(rotation_error(same), torch.zeros(N, dtype=torch.float64), atol=1e-5)
+    axis = torch.nn.functional.normalize(torch.randn(3, generator=g, dtype=torch.float64), dim=0)
+    delta = quat_from_axis_angle(axis, torch.tensor(angle, dtype=torch.float64)).expand(T, N, B, 4)
+    turned = quat_mul(ref_rot, delta)
+    err = rotation_error(Trajectories(tr.sim, tr.ref, 30.0, None, turned, ref_rot))
+    assert torch.allclose(err, torch.full((N,), math.degrees(angle), dtype=torch.float64), atol=1e-4)
+    world = quat_from_axis_angle(axis.flip(0), torch.tensor(1.0, dtype=torch.float64)).expand(T, N, B, 4)
+    both = rotation_error(Trajectories(tr.sim, tr.ref, 30.0, None, quat_mul(world, turned), quat_mul(world, ref_rot)))
+    assert torch.allclose(both, err, atol=1e-4)
+    assert torch.isnan(rotation_error(tr)).all()  # not recorded

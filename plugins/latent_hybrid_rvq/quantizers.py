@@ -261,11 +261,23 @@ class VectorQuantizer(Quantizer):
 
     @torch.no_grad()
     def reset_dead(self, x: Tensor) -> Tensor:
-        """Replace the codes with EMA size < threshold by random rows of ``x``; return the (K,) mask."""
+        """Replace codes with EMA size < threshold by distinct random rows of ``x``; return the (K,)
+        mask of the codes replaced.
+
+        With more dead codes than rows, a random subset of ``len(x)`` dead codes is replaced now and
+        the rest in later steps: filling them all from one small batch would put several copies of
+        one row in the codebook, and only one copy could ever be chosen.
+        """
         dead = self.cluster_size < self.dead_threshold
         n_dead = int(dead.sum())
         if n_dead == 0 or x.shape[0] == 0:
-            return dead
+            return torch.zeros_like(dead)
+        if n_dead > x.shape[0]:
+            ids = dead.nonzero().squeeze(-1)
+            keep = ids[torch.randperm(n_dead, device=ids.device)[: x.shape[0]]]
+            dead = torch.zeros_like(dead)
+            dead[keep] = True
+            n_dead = x.shape[0]
         new = _choose_rows(x.detach().to(self.embed.dtype), n_dead)
         self.embed[dead] = new
         self.cluster_size[dead] = self.dead_threshold
