@@ -163,7 +163,12 @@ class StageContext:
         return self.build(stage or self.stage, skeleton=self.skeleton, checkpoint=checkpoint, device=self.device)
 
     def make_rl_env(self, num_envs: int) -> Any:
-        """The RL problem of this stage: ``stage_component().make_env(self, num_envs)`` (a VecEnv)."""
+        """The RL problem of this stage: ``stage_component().make_env(self, num_envs)`` (a VecEnv);
+        for the ``task`` stage, :func:`mocap.hierarchy.make_task_env` (the task through the latent space)."""
+        if self.stage == "task":
+            from mocap.hierarchy import make_task_env
+
+            return make_task_env(self, num_envs)
         component = self.stage_component()
         if not hasattr(component, "make_env"):
             raise StageFailed(f"{self.stage} {getattr(self.spec, self.stage).name!r} cannot be trained by RL (no make_env)")

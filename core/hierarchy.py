@@ -1,0 +1,294 @@
+"""Hierarchical control: a task policy acting in the task action space of any latent space.
+
+The ``task`` stage of a spec (``task: {name: speed, params: ..., trainer: {name: ppo, ...}}``)
+trains a policy with PPO on a :class:`TaskEnv`:
+
+* **observation** = ``[s^p | g]``: the humanoid's proprioception (:func:`mocap.observations.proprioception`,
+  heading frame) and the task's goal observation ``task.observe(state)``;
+* **action** ``a`` in ``latent.task_action_space`` (PULSE: a continuous residual; Hybrid-RVQ: code
+  indices; ``scratch``: normalized PD targets). The frozen latent space maps it:
+  ``z = latent.to_latent(obs, a)``, ``out = latent.decoder(obs, z)``, and ``out`` becomes PD targets
+  (identity for a decoder distilled with ``label: pd_targets`` and for ``scratch``; otherwise the
+  imitator's ``to_pd_targets``, which must not need a reference motion);
+* **reward / termination** from the task (``task.reward``, ``task.terminated``) plus numerical
+  instability; **truncation** after ``task.episode_steps`` (default 300 = 10 s);
+* **starts**: reference states of the motion library (clip and time drawn with its weights) in
+  which every non-foot body is above 0.25 m (standing or moving, not lying), then ``task.reset``;
+* **logged**: episode return, length and **normalized return** = return / (``task.max_reward`` ×
+  ``episode_steps``) (PULSE Fig. 4), and the task's own metrics every iteration (``task.metrics()``).
+
+Tasks never see which latent space drives the humanoid; latent spaces never see the task. Optional
+task attributes used here: ``episode_steps``, ``max_reward``, ``sim_overrides`` (simulator params
+the task needs, e.g. the strike target), ``attach(sim)``, ``step(state)`` (after each reward),
+``state_dict()`` / ``load_state_dict()`` (goals, for exact resume).
+
+``scratch`` (registered here) is the no-latent baseline: a latent space whose task action is the
+PD target itself, ``q = offset + scale · a`` with ``a`` in [-1, 1] mapped to each joint's range
+(PHC's absolute action mapping), so that "task policy from scratch" runs through the same code.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import numpy as np
+import torch
+from pydantic import BaseModel, ConfigDict, Field
+from torch import Tensor
+
+from mocap.hooks import hookimpl
+from mocap.interfaces import Box, LatentSample, LatentSpace, Simulator, Task
+from mocap.motion.library import MotionLibrary
+from mocap.observations import proprioception
+from mocap.rl.env import StepResult
+from mocap.skeleton import Skeleton
+from mocap.state import HumanoidState, Observations, SimState
+
+STATE_FORMAT = "mocap.task_env/1"
+_HUMANOID_FIELDS = ("root_pos", "root_rot", "root_lin_vel", "root_ang_vel", "dof_pos", "dof_vel")
+
+
+# ---------------------------------------------------------------------------------- scratch
+class ScratchParams(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    range_scale: float = Field(
+        1.0, gt=0, description="a = ±1 reaches this fraction of each joint's half range around its midpoint (PHC absolute map: 1.0)"
+    )
+
+
+class ScratchLatent(LatentSpace):
+    """No latent space: the task action is the normalized PD target (module docstring)."""
+
+    def __init__(self, params: ScratchParams, skeleton: Skeleton):
+        super().__init__()
+        lo_t = torch.tensor([float(h.range[0]) for h in skeleton.hinges])
+        hi_t = torch.tensor([float(h.range[1]) for h in skeleton.hinges])
+        self.register_buffer("offset", 0.5 * (lo_t + hi_t))
+        self.register_buffer("scale", 0.5 * (hi_t - lo_t) * params.range_scale)
+        self.latent_dim = skeleton.num_dofs
+
+    def encoder(self, obs: Observations) -> LatentSample:
+        raise NotImplementedError("scratch has no encoder: it is the no-latent baseline")
+
+    def prior(self, obs: Observations) -> LatentSample:
+        zero = torch.zeros(obs.proprio.shape[0], self.latent_dim, device=obs.proprio.device)
+        return LatentSample(mean=zero, std=None, z=zero)
+
+    def decoder(self, obs: Observations, z: Tensor) -> Tensor:
+        return self.offset + self.scale * z
+
+    @property
+    def task_action_space(self) -> Box:
+        return Box((self.latent_dim,), low=-1.0, high=1.0)
+
+    def to_latent(self, obs: Observations, task_action: Tensor) -> Tensor:
+        return task_action.float().clamp(-1.0, 1.0)
+
+
+def make_scratch(params: ScratchParams, *, skeleton: Skeleton, checkpoint: Any = None, device: Any = "cpu") -> ScratchLatent:
+    return ScratchLatent(params, skeleton).to(device)
+
+
+# ------------------------------------------------------------------------------------- env
+class TaskEnv:
+    """A batched downstream task driven through a frozen latent space (module docstring)."""
+
+    def __init__(
+        self,
+        task: Task,
+        latent: Any,
+        to_pd_targets: Callable[[Observations, Tensor], Tensor],
+        library: MotionLibrary,
+        sim: Simulator,
+        *,
+        seed: int = 0,
+        sixd: str = "zhou",
+        start_min_height: float = 0.25,
+    ):
+        self.task, self.latent, self.map_targets = task, latent, to_pd_targets
+        self.library, self.sim = library, sim
+        self.num_envs = int(sim.num_envs)
+        self.skeleton = sim.skeleton
+        self.sixd = sixd
+        self.start_min_height = float(start_min_height)
+        self.episode_steps = int(getattr(task, "episode_steps", 300))
+        self.max_reward = float(getattr(task, "max_reward", 1.0))
+        self.action_space = latent.task_action_space
+        self.proprio_dim = 15 * self.skeleton.num_bodies - 2
+        self.obs_dim = self.proprio_dim + int(task.goal_dim)
+        self._gen = torch.Generator().manual_seed(int(seed))
+        self.steps = torch.zeros(self.num_envs, dtype=torch.long)
+        self.ep_return = torch.zeros(self.num_envs)
+        self._obs: Tensor | None = None
+        if hasattr(latent, "eval"):
+            latent.eval()
+        # the decoder's raw output (PULSE: decode_action; its `decoder` maps through an attached imitator)
+        self._decode = getattr(latent, "decode_action", None) or latent.decoder
+        attach = getattr(task, "attach", None)
+        if callable(attach):
+            attach(sim)
+
+    # ------------------------------------------------------------------------------- helpers
+    def _proprio(self, state: SimState) -> Observations:
+        return Observations(proprio=proprioception(state, self.sixd).float(), goal=None, extra={})
+
+    def _observe(self, state: SimState) -> Tensor:
+        return torch.cat([proprioception(state, self.sixd).float(), self.task.observe(state).float()], -1)
+
+    def _reset_envs(self, ids: Tensor) -> None:
+        from mocap.generation import start_states
+
+        clip_ids, times = start_states(self.library, len(ids), self.skeleton, self.start_min_height, self._gen)
+        self.sim.reset(ids, self.library.frames(clip_ids, times))
+        self.steps[ids] = 0
+        self.ep_return[ids] = 0.0
+        self.task.reset(ids, self.sim.state)
+
+    # ---------------------------------------------------------------------------------- VecEnv
+    def reset(self) -> Tensor:
+        self._reset_envs(torch.arange(self.num_envs))
+        self._obs = self._observe(self.sim.state)
+        return self._obs.clone()
+
+    @torch.no_grad()
+    def pd_targets(self, state: SimState, actions: Tensor) -> Tensor:
+        """PD targets of task actions ``actions`` in ``state`` through the frozen latent space."""
+        obs = self._proprio(state)
+        z = self.latent.to_latent(obs, actions)
+        raw = self._decode(obs, z)
+        return self.map_targets(obs, raw)
+
+    def step(self, actions: Tensor) -> StepResult:
+        state = self.sim.state
+        targets = self.pd_targets(state, actions)
+        state = self.sim.step(targets)
+        reward = self.task.reward(state, actions).float().cpu()
+        step_hook = getattr(self.task, "step", None)
+        if callable(step_hook):
+            step_hook(state)
+        self.steps += 1
+        self.ep_return += reward
+        unstable = state.unstable.cpu() if state.unstable.numel() else torch.zeros(self.num_envs, dtype=torch.bool)
+        terminated = self.task.terminated(state).cpu().bool() | unstable
+        truncated = (self.steps >= self.episode_steps) & ~terminated
+        final_obs = self._observe(state)
+        done = terminated | truncated
+        episodes: dict[str, Tensor] = {}
+        if bool(done.any()):
+            ids = done.nonzero().squeeze(-1)
+            episodes = {
+                "return": self.ep_return[ids].clone(),
+                "length": self.steps[ids].float(),
+                "normalized_return": self.ep_return[ids] / (self.max_reward * self.episode_steps),
+                "success": (~terminated[ids]).float(),
+            }
+            self._reset_envs(ids)
+            obs = self._observe(self.sim.state)
+        else:
+            obs = final_obs
+        self._obs = obs
+        info = {"reward": float(reward.mean()), "unstable": float(unstable.float().mean())}
+        return StepResult(obs.clone(), reward, terminated, truncated, final_obs, info, episodes)
+
+    def after_iteration(self, iteration: int, policy_fn: Any) -> dict[str, float]:
+        """The task's metrics accumulated over the iteration (logged under ``eval/``)."""
+        return {k: float(v) for k, v in self.task.metrics().items()}
+
+    def state_dict(self) -> dict[str, Any]:
+        sd: dict[str, Any] = {
+            "format": STATE_FORMAT,
+            "num_envs": self.num_envs,
+            "generator": self._gen.get_state().clone(),
+            "steps": self.steps.clone(),
+            "ep_return": self.ep_return.clone(),
+        }
+        if hasattr(self.sim, "get_physics_state"):
+            sd["physics"] = torch.from_numpy(np.array(self.sim.get_physics_state(), dtype=np.float64, copy=True))
+        else:
+            s = self.sim.state
+            sd["sim_state"] = {k: getattr(s, k).cpu().clone() for k in _HUMANOID_FIELDS}
+        task_sd = getattr(self.task, "state_dict", None)
+        if callable(task_sd):
+            sd["task"] = task_sd()
+        return sd
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        if state.get("format") != STATE_FORMAT:
+            raise ValueError(f"not a TaskEnv state (format {state.get('format')!r})")
+        if int(state["num_envs"]) != self.num_envs:
+            raise ValueError(f"state has {state['num_envs']} envs, this env {self.num_envs}")
+        self._gen.set_state(state["generator"].clone())
+        self.steps = state["steps"].clone()
+        self.ep_return = state["ep_return"].clone()
+        ids = torch.arange(self.num_envs)
+        if "physics" in state and hasattr(self.sim, "set_physics_state"):
+            phys = state["physics"]
+            phys = phys.detach().cpu().numpy() if isinstance(phys, Tensor) else np.asarray(phys)
+            self.sim.set_physics_state(ids, np.array(phys, dtype=np.float64, copy=True))
+        else:
+            self.sim.reset(ids, HumanoidState(**{k: v for k, v in state["sim_state"].items()}))
+        if "task" in state and callable(getattr(self.task, "load_state_dict", None)):
+            self.task.load_state_dict(state["task"])
+        self._obs = self._observe(self.sim.state)
+
+    def close(self) -> None:
+        self.sim.close()
+
+
+def make_task_env(ctx: Any, num_envs: int) -> TaskEnv:
+    """The ``task`` stage's RL env (called by ``StageContext.make_rl_env``): the spec's task, its
+    latent space (trained upstream, or untrained such as ``scratch``) and the simulator with the
+    task's ``sim_overrides``."""
+    from mocap.pipeline import StageFailed
+
+    spec = ctx.spec
+    if spec.latent is None:
+        raise StageFailed("the task stage needs a latent space (use `latent: {name: scratch}` for a policy without one)")
+    skeleton = ctx.skeleton
+    task_ref = spec.task
+    task = ctx.plugins.get("task", task_ref.name).build(ctx.params("task"), skeleton=skeleton, num_envs=num_envs, device="cpu")
+    latent_stage = ctx.upstream.get("latent")
+    latent_ckpt = latent_stage.checkpoint if latent_stage is not None else None
+    if latent_ckpt is None and spec.latent.trainer is not None:
+        raise StageFailed("the latent stage has no checkpoint")
+    latent = ctx.stage_component("latent", checkpoint=latent_ckpt)
+    label = "pd_targets"
+    if latent_ckpt is not None:
+        from mocap.distill import load_latent_state
+
+        label = str(load_latent_state(latent_ckpt)["extra"].get("label", "policy_output"))
+    if label == "pd_targets":
+        mapping: Callable[[Observations, Tensor], Tensor] = lambda obs, out: out  # noqa: E731
+    else:
+        imitator_stage = ctx.upstream.get("imitator")
+        imitator = ctx.stage_component("imitator", checkpoint=imitator_stage.checkpoint if imitator_stage else None)
+        mapping = imitator.to_pd_targets
+    motion_set = ctx.build("motions").load(skeleton)
+    library = MotionLibrary(motion_set, skeleton)
+    sim_ref = spec.simulator
+    sim_params = ctx.params("simulator")
+    overrides = getattr(task, "sim_overrides", None) or {}
+    if overrides:
+        sim_params = type(sim_params).model_validate({**sim_params.model_dump(), **overrides})
+    sim = ctx.plugins.get("simulator", sim_ref.name).build(sim_params, skeleton=skeleton, num_envs=num_envs, seed=ctx.seed)
+    env = TaskEnv(task, latent, mapping, library, sim, seed=ctx.seed)
+    space = env.action_space
+    probe = (
+        torch.zeros(num_envs, len(space.nvec), dtype=torch.long) if hasattr(space, "nvec") else torch.zeros(num_envs, *space.shape)
+    )
+    try:  # a decoder that needs the reference motion fails here, before training starts
+        env.pd_targets(sim.state, probe)
+    except ValueError as exc:
+        raise StageFailed(
+            f"task {task_ref.name}: the latent space cannot act without a reference motion ({exc}); distill it with "
+            "label: pd_targets or use an imitator with absolute actions"
+        ) from None
+    return env
+
+
+@hookimpl
+def register_latent_spaces(register):  # type: ignore[no-untyped-def]
+    register("scratch", make_scratch, params=ScratchParams, description="no latent space: task actions are normalized PD targets (baseline)")
+
+
+__all__ = ["ScratchLatent", "ScratchParams", "TaskEnv", "make_scratch", "make_task_env"]
