@@ -63,6 +63,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 from torch import Tensor
 
 from mocap.checkpoint import load_checkpoint, save_checkpoint
+from mocap.faults import FaultGuard
 from mocap.hooks import hookimpl
 from mocap.interfaces import Imitator, Simulator, StageResult, Trainer
 from mocap.hard_negatives import FailureTracker, failure_weights
@@ -127,6 +128,9 @@ class DistillParams(BaseModel):
         None, gt=0, description="seconds per evaluation episode of looping clips; None: episode_steps × dt"
     )
     torch_threads: int | None = Field(1, ge=1, description="torch intra-op threads for this stage (None: keep the process setting)")
+    max_consecutive_faults: int = Field(
+        10, ge=0, description="stop after this many consecutive batches with non-finite values (each is skipped); 0: only skip"
+    )
     checkpoint_every: int = Field(10, ge=1, description="iterations between checkpoints (also at the end and on Ctrl-C)")
     print_every: int = Field(10, ge=1, description="iterations between progress lines when the console is not a terminal")
 
@@ -419,6 +423,7 @@ class DistillTrainer(Trainer):
         window: dict[str, deque[float]] = {}
         iteration, env_steps = 0, 0
         last_eval: dict[str, float] = {}
+        guard = FaultGuard(p.max_consecutive_faults, "distill")
         if ckpt_path.is_file():
             ck = load_checkpoint(ckpt_path, map_location=device)
             if ck.get("format") != CHECKPOINT_FORMAT:
@@ -430,6 +435,7 @@ class DistillTrainer(Trainer):
             iteration, env_steps = int(ck["iteration"]), int(ck["env_steps"])
             window = {k: deque(v, maxlen=EPISODE_WINDOW) for k, v in ck["episode_window"].items()}
             last_eval = dict(ck.get("last_eval", {}))
+            guard.load_state_dict(ck.get("faults", {}))
             _set_rng_state(ck["rng"])
             ctx.log.truncate_after(iteration)
             ctx.console.print(f"distill: resuming at iteration {iteration} ({env_steps:,} env steps)")
@@ -459,6 +465,7 @@ class DistillTrainer(Trainer):
                     "rng": _rng_state(),
                     "episode_window": {k: list(v) for k, v in window.items()},
                     "last_eval": last_eval,
+                    "faults": guard.state_dict(),
                     "params": p.model_dump(mode="json"),
                     "finished": final,
                 },
@@ -486,7 +493,9 @@ class DistillTrainer(Trainer):
                 t_rollout = time.perf_counter() - t0
 
                 t1 = time.perf_counter()
-                stats = self._update(student, optimizer, params_list, chunk, teacher_out, starts, gen, progress)
+                stats: dict[str, float] = {}
+                if guard.check_inputs(observations=chunk.proprio, goals=chunk.goal, labels=teacher_out):
+                    stats = self._update(student, optimizer, params_list, chunk, teacher_out, starts, gen, progress, guard)
                 t_update = time.perf_counter() - t1
                 iteration += 1
 
@@ -501,6 +510,7 @@ class DistillTrainer(Trainer):
                     "time/update_s": t_update,
                     "steps_per_s": p.batch_size / max(t_rollout + t_update, 1e-9),
                     "steps_per_s_run": (env_steps - steps_at_start) / max(elapsed, 1e-9),
+                    **guard.take_counts(),
                 }
                 for key, vals in window.items():
                     if vals:
@@ -625,8 +635,10 @@ class DistillTrainer(Trainer):
         starts: Tensor,
         gen: torch.Generator,
         progress: float,
+        guard: FaultGuard | None = None,
     ) -> dict[str, float]:
         p = self.params
+        guard = guard or FaultGuard(0, "distill")
         N = teacher_out.shape[1]
         update_norm = getattr(student, "update_normalizers", None)
         if callable(update_norm):
@@ -642,8 +654,9 @@ class DistillTrainer(Trainer):
                 loss = losses["loss"]
                 optimizer.zero_grad(set_to_none=True)
                 loss.backward()
-                grad_norm = torch.nn.utils.clip_grad_norm_(params, p.max_grad_norm or math.inf)
-                optimizer.step()
+                stepped, grad_norm = guard.step(optimizer, loss, params, p.max_grad_norm)
+                if not stepped:
+                    continue
                 for key, val in losses.items():
                     name = "loss/total" if key == "loss" else f"loss/{key}"
                     sums[name] = sums.get(name, 0.0) + float(torch.as_tensor(val).detach())

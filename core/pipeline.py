@@ -165,11 +165,16 @@ class StageContext:
     def make_rl_env(self, num_envs: int) -> Any:
         """The RL problem of this stage: ``stage_component().make_env(self, num_envs)`` (a VecEnv);
         for the ``task`` stage, :func:`mocap.hierarchy.make_task_env` (the task through the latent space)."""
-        if self.stage == "task":
+        if self.stage == "task" and self.spec.latent is not None:
             from mocap.hierarchy import make_task_env
 
             return make_task_env(self, num_envs)
-        component = self.stage_component()
+        try:
+            component = self.stage_component()
+        except TypeError:  # a task factory (params, *, skeleton, num_envs, device): it runs through a latent space
+            component = None
+        if self.stage == "task" and not hasattr(component, "make_env"):
+            raise StageFailed("the task stage needs a latent space (use `latent: {name: scratch}` for a policy without one)")
         if not hasattr(component, "make_env"):
             raise StageFailed(f"{self.stage} {getattr(self.spec, self.stage).name!r} cannot be trained by RL (no make_env)")
         return component.make_env(self, num_envs)

@@ -28,6 +28,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 from torch import Tensor
 
 from mocap.checkpoint import load_checkpoint, save_checkpoint
+from mocap.faults import FaultGuard
 from mocap.interfaces import Box, MultiDiscrete, StageResult, Trainer
 from mocap.progress import IterationProgress
 from mocap.rl.networks import ActorCritic, save_policy
@@ -129,6 +130,9 @@ class PPOParams(BaseModel):
 
     num_envs: int = Field(128, ge=1, description="parallel envs (PHC: 1536)")
     horizon: int = Field(64, ge=1, description="steps per env per iteration; batch = num_envs × horizon (PHC: 32)")
+    max_consecutive_faults: int = Field(
+        10, ge=0, description="stop after this many consecutive batches with non-finite values (each is skipped); 0: only skip"
+    )
     total_env_steps: int = Field(10_000_000, ge=1, description="training budget in env steps (rounded up to whole iterations)")
     epochs: int = Field(4, ge=1, description="passes over each batch (PHC: 6 mini-epochs)")
     minibatch_size: int = Field(
@@ -253,6 +257,7 @@ class PPOTrainer(Trainer):
         window: dict[str, deque[float]] = {}
 
         iteration, env_steps = 0, 0
+        guard = FaultGuard(p.max_consecutive_faults, "ppo")
         if ckpt_path.is_file():
             ck = load_checkpoint(ckpt_path, map_location=device)
             if ck.get("format") != CHECKPOINT_FORMAT:
@@ -263,6 +268,7 @@ class PPOTrainer(Trainer):
             obs = ck["obs"].to(device)
             iteration, env_steps = int(ck["iteration"]), int(ck["env_steps"])
             window = {k: deque(v, maxlen=EPISODE_WINDOW) for k, v in ck["episode_window"].items()}
+            guard.load_state_dict(ck.get("faults", {}))
             _set_rng_state(ck["rng"])
             ctx.log.truncate_after(iteration)
             ctx.console.print(f"ppo: resuming at iteration {iteration} ({env_steps:,} env steps)")
@@ -297,6 +303,7 @@ class PPOTrainer(Trainer):
                     "obs": obs.detach().cpu(),
                     "rng": _rng_state(),
                     "episode_window": {k: list(v) for k, v in window.items()},
+                    "faults": guard.state_dict(),
                     "params": p.model_dump(mode="json"),
                     "finished": final,
                 },
@@ -359,9 +366,11 @@ class PPOTrainer(Trainer):
 
                 # ----------------------------------------------------------------- update
                 t1 = time.perf_counter()
-                stats = self._update(model, optimizer, b_obs, b_act, b_logp, b_val, advantages, returns)
-                if p.normalize_obs:  # after the update, so that rollout and update saw the same statistics
-                    model.obs_norm.update(b_obs)
+                stats: dict[str, float] = {}
+                if guard.check_inputs(observations=b_obs, rewards=b_rew, advantages=advantages, returns=returns):
+                    stats = self._update(model, optimizer, b_obs, b_act, b_logp, b_val, advantages, returns, guard)
+                    if p.normalize_obs:  # after the update, so that rollout and update saw the same statistics
+                        model.obs_norm.update(b_obs)
                 t_update = time.perf_counter() - t1
                 iteration += 1
 
@@ -381,6 +390,7 @@ class PPOTrainer(Trainer):
                     "steps_per_s": T * N / max(t_rollout + t_update, 1e-9),
                     "rollout_steps_per_s": T * N / max(t_rollout, 1e-9),
                     "steps_per_s_run": (env_steps - steps_at_start) / max(elapsed, 1e-9),
+                    **guard.take_counts(),
                 }
                 if model.log_std is not None:
                     log["std"] = float(model.log_std.detach().exp().mean())
@@ -431,8 +441,11 @@ class PPOTrainer(Trainer):
         b_val: Tensor,
         advantages: Tensor,
         returns: Tensor,
+        guard: FaultGuard | None = None,
     ) -> dict[str, float]:
-        """``epochs`` passes of shuffled minibatches over the rollout; returns averaged diagnostics."""
+        """``epochs`` passes of shuffled minibatches over the rollout; returns averaged diagnostics
+        (a minibatch with a non-finite loss or gradient is skipped by ``guard``)."""
+        guard = guard or FaultGuard(0, "ppo")
         p = self.params
         B = b_logp.numel()
         obs = b_obs.reshape(B, -1)
@@ -453,6 +466,7 @@ class PPOTrainer(Trainer):
         params = [q for q in model.parameters() if q.requires_grad]
         n_mb = B // p.minibatch_size
         sums: dict[str, float] = {}
+        done_steps = 0
         model.train()
         for _ in range(p.epochs):
             perm = torch.randperm(B, device=obs.device)
@@ -468,9 +482,10 @@ class PPOTrainer(Trainer):
                 loss = pg_loss + p.value_coef * v_loss - p.entropy_coef * entropy + p.bounds_coef * b_loss
                 optimizer.zero_grad(set_to_none=True)
                 loss.backward()
-                # global-norm clip (max_grad_norm None: inf, i.e. only measure the norm)
-                grad_norm = torch.nn.utils.clip_grad_norm_(params, p.max_grad_norm or math.inf)
-                optimizer.step()
+                # global-norm clip (max_grad_norm None: inf, i.e. only measure the norm); skipped if not finite
+                stepped, grad_norm = guard.step(optimizer, loss, params, p.max_grad_norm)
+                if not stepped:
+                    continue
                 with torch.no_grad():
                     # k3 estimator of KL(π_old || π): E[(r − 1) − log r] (Schulman, "Approximating KL divergence")
                     approx_kl = ((ratio - 1) - log_ratio).mean()
@@ -485,9 +500,10 @@ class PPOTrainer(Trainer):
                     ("clip_fraction", clip_frac),
                     ("grad_norm", grad_norm),
                 ):
-                    sums[key] = sums.get(key, 0.0) + float(val.detach())
+                    sums[key] = sums.get(key, 0.0) + float(val.detach() if isinstance(val, Tensor) else val)
+                done_steps += 1
         model.eval()
-        steps = max(p.epochs * n_mb, 1)
+        steps = max(done_steps, 1)
         return {k: v / steps for k, v in sums.items()}
 
 

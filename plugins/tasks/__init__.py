@@ -1,0 +1,35 @@
+"""Downstream tasks of PULSE (Luo et al., ICLR 2024, Sec. 4.3 / App. C, following ASE): ``speed``,
+``reach`` and ``strike``, for any skeleton and any action space (a task never knows which latent
+space drives the humanoid).
+
+Modules:
+
+* :mod:`mocap_tasks.common`: fall termination, body lookup, seeded sampling, metric sums;
+* :mod:`mocap_tasks.speed`: move at a target speed along a target direction;
+* :mod:`mocap_tasks.reach`: bring the right hand to a target point;
+* :mod:`mocap_tasks.strike`: knock a standing box over with the hand (the simulator's target prop);
+* :mod:`mocap_tasks.plugin`: the entry point registering the three tasks.
+
+Every task follows :class:`mocap.interfaces.Task`: ``reset(env_ids, state)`` samples goals with the
+task's seeded ``torch.Generator``; ``observe(state)`` is the goal in the root's heading frame;
+``reward(state, actions)`` is bounded by ``max_reward``; ``terminated(state)`` is a fall (plus, for
+strike, a forbidden contact with the box), never a time limit; ``step(state)`` is the per-control-step
+hook (goal changes, counters); ``metrics()`` returns and clears the task metrics documented in each
+module. Each parameter that differs between the paper ([P]) and the official code ([CODE]) says so.
+"""
+
+from mocap_tasks.reach import ReachParams, ReachTask, make_reach
+from mocap_tasks.speed import SpeedParams, SpeedTask, make_speed
+from mocap_tasks.strike import StrikeParams, StrikeTask, make_strike
+
+__all__ = [
+    "ReachParams",
+    "ReachTask",
+    "SpeedParams",
+    "SpeedTask",
+    "StrikeParams",
+    "StrikeTask",
+    "make_reach",
+    "make_speed",
+    "make_strike",
+]

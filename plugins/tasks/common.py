@@ -1,0 +1,240 @@
+"""Shared pieces of the downstream tasks: fall termination, body lookup, seeded sampling, metric sums.
+
+Conventions are :mod:`mocap.state`'s (z up, wxyz, SI, 30 Hz control). Goal observations are
+expressed in the **heading frame** of the humanoid's root (:func:`mocap.observations.world_to_heading`):
+rotated by the inverse of the root's yaw and, for positions, taken relative to the root, so that a
+yaw of the whole world about z plus a translation leaves them unchanged.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import torch
+from mocap.rotations import heading_angle
+from mocap.skeleton import Skeleton
+from mocap.state import SimState
+from mocap.termination import allowed_contact_mask, fallen
+from pydantic import BaseModel, ConfigDict, Field
+from torch import Tensor
+
+__all__ = [
+    "FallParams",
+    "MetricSums",
+    "TaskBase",
+    "angle_between_2d",
+    "horizontal_unit",
+    "quat_from_yaw",
+    "resolve_body",
+    "root_heading",
+    "rows",
+    "wrap_angle",
+]
+
+#: right-hand body names of the built-in skeletons (``smpl``, ``amp``), tried in order
+RIGHT_HAND_NAMES: tuple[str, ...] = ("R_Hand", "right_hand")
+
+
+class FallParams(BaseModel):
+    """Early termination on falls, shared by every task (PULSE code: contact and height 0.15 m)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    early_termination: bool = Field(
+        True,
+        description="terminate the episode when the humanoid falls ([P] and [CODE]: on)",
+    )
+    fall_height: float = Field(
+        0.15,
+        ge=0.0,
+        description="a fall is a ground contact of any non-foot body OR the root origin lower than this above the "
+        "ground, m (mocap.termination.fallen). [CODE] (ASE/PULSE compute_humanoid_reset) terminates on a "
+        "non-foot contact AND a non-foot body below 0.15 m; 0 disables the height test",
+    )
+    allowed_contacts: tuple[str, ...] | None = Field(
+        None,
+        description="bodies allowed to touch the ground (default: the skeleton's feet, as the code's contact bodies)",
+    )
+
+
+def resolve_body(
+    skeleton: Skeleton, name: str | None, candidates: Sequence[str] = RIGHT_HAND_NAMES
+) -> int:
+    """Index of body ``name``, or of the first of ``candidates`` the skeleton has when ``name`` is None."""
+    names = tuple(skeleton.body_names)
+    if name is not None:
+        if name not in names:
+            raise ValueError(
+                f"skeleton {skeleton.name!r} has no body {name!r}; bodies: {', '.join(names)}"
+            )
+        return names.index(name)
+    for c in candidates:
+        if c in names:
+            return names.index(c)
+    raise ValueError(
+        f"skeleton {skeleton.name!r} has none of the bodies {', '.join(candidates)}; name one explicitly"
+    )
+
+
+def rows(state: SimState, env_ids: Tensor, num_envs: int) -> SimState:
+    """The rows of ``state`` for ``env_ids``: ``state`` itself when it has one row per id, else indexed.
+
+    ``Task.reset`` may receive either the reset rows (K) or the full batch (N)."""
+    k = int(env_ids.numel())
+    n = state.num_envs
+    if n == k:
+        return state
+    if n == num_envs:
+        return state.index(env_ids.to(state.root_pos.device))
+    raise ValueError(
+        f"reset got {k} env ids and a state with {n} rows (expected {k} or {num_envs})"
+    )
+
+
+def wrap_angle(a: Tensor) -> Tensor:
+    """Angles wrapped to ``(-pi, pi]``."""
+    return torch.atan2(torch.sin(a), torch.cos(a))
+
+
+def quat_from_yaw(yaw: Tensor) -> Tensor:
+    """(..., 4) wxyz rotation by ``yaw`` about world z."""
+    half = 0.5 * yaw
+    z = torch.zeros_like(half)
+    return torch.stack((torch.cos(half), z, z, torch.sin(half)), dim=-1)
+
+
+def root_heading(state: SimState) -> Tensor:
+    """(N,) facing yaw of the root, rad."""
+    return heading_angle(state.root_rot)
+
+
+class MetricSums:
+    """Named running sums and counts; :meth:`pop` returns the means and clears them."""
+
+    def __init__(self) -> None:
+        self._sum: dict[str, float] = {}
+        self._count: dict[str, float] = {}
+
+    def add(
+        self, name: str, values: Tensor | float, count: float | None = None
+    ) -> None:
+        """Add ``values`` (a tensor: summed, counted by its number of elements) or a float with ``count``."""
+        if isinstance(values, Tensor):
+            v = values.detach()
+            total, n = float(v.double().sum()), float(v.numel())
+        else:
+            total, n = float(values), float(1 if count is None else count)
+        if n == 0:
+            return
+        self._sum[name] = self._sum.get(name, 0.0) + total
+        self._count[name] = self._count.get(name, 0.0) + n
+
+    def pop(self, totals: Sequence[str] = ()) -> dict[str, float]:
+        """Means of every name with data (sums for the names in ``totals``); then clear."""
+        out = {
+            k: (self._sum[k] if k in totals else self._sum[k] / self._count[k])
+            for k in self._sum
+            if self._count[k] > 0
+        }
+        self._sum.clear()
+        self._count.clear()
+        return out
+
+
+class TaskBase:
+    """Mixin holding what every task shares: sizes, device, generator, fall termination, step counters."""
+
+    max_reward: float = 1.0
+    #: simulator params the task needs (strike: the target prop); set per instance
+    sim_overrides: dict[str, Any]
+
+    def _setup(
+        self,
+        fall: FallParams,
+        skeleton: Skeleton,
+        num_envs: int,
+        device: Any,
+        seed: int,
+    ) -> None:
+        if num_envs < 1:
+            raise ValueError(f"num_envs must be >= 1, got {num_envs}")
+        self.skeleton = skeleton
+        self.sim_overrides = {}
+        self.num_envs = int(num_envs)
+        self.device = torch.device(device)
+        self.fall = fall
+        self._allowed = allowed_contact_mask(
+            skeleton, fall.allowed_contacts, device=self.device
+        )
+        self.generator = torch.Generator(device="cpu")
+        self.generator.manual_seed(int(seed))
+        self.sim: Any = None
+        self.dt = 1.0 / 30.0
+        #: (N,) control steps since the env's last reset (advanced by :meth:`step`)
+        self.progress = torch.zeros(self.num_envs, dtype=torch.long, device=self.device)
+        self._sums = MetricSums()
+
+    # -------------------------------------------------------------------------- sampling
+    def _rand(self, *shape: int) -> Tensor:
+        """U[0, 1) of ``shape`` from the task's generator (CPU, then moved: reproducible anywhere)."""
+        return torch.rand(*shape, generator=self.generator, dtype=torch.float64).to(
+            self.device
+        )
+
+    def _randint(self, low: int, high: int, n: int) -> Tensor:
+        """Integers in ``[low, high)`` (``high`` exclusive, as ``torch.randint``; ``low`` when equal)."""
+        if high <= low:
+            return torch.full((n,), int(low), dtype=torch.long, device=self.device)
+        return torch.randint(int(low), int(high), (n,), generator=self.generator).to(
+            self.device
+        )
+
+    def _ids(self, env_ids: Tensor) -> Tensor:
+        return torch.as_tensor(env_ids, dtype=torch.long).reshape(-1).to(self.device)
+
+    # ------------------------------------------------------------------------ simulator
+    def attach(self, sim: Any) -> None:
+        """Keep the simulator (its control period ``dt``, ground-only contacts, props)."""
+        self.sim = sim
+        dt = getattr(sim, "dt", None)
+        if dt is not None:
+            self.dt = float(dt)
+
+    def _ground_contact(self, state: SimState) -> Tensor:
+        """(N, B) ground-only contacts: the simulator's ``ground_contact`` when attached and it has one."""
+        gc = getattr(self.sim, "ground_contact", None) if self.sim is not None else None
+        if isinstance(gc, Tensor) and gc.shape == state.body_contact.shape:
+            return gc.to(state.body_contact.device)
+        return state.body_contact
+
+    def _fallen(self, state: SimState) -> Tensor:
+        if not self.fall.early_termination:
+            return torch.zeros(
+                state.num_envs, dtype=torch.bool, device=state.root_pos.device
+            )
+        contact = self._ground_contact(state)
+        if contact.numel() == 0:
+            contact = torch.zeros(
+                state.body_pos.shape[:2], dtype=torch.bool, device=state.root_pos.device
+            )
+        return fallen(
+            state,
+            self._allowed.to(contact.device),
+            self.fall.fall_height,
+            contact=contact,
+        )
+
+
+def horizontal_unit(v: Tensor, eps: float = 1e-9) -> Tensor:
+    """(N, 2) ``v[..., :2]`` normalised (zero where it is shorter than ``eps``)."""
+    xy = v[..., :2]
+    n = torch.linalg.vector_norm(xy, dim=-1, keepdim=True)
+    return torch.where(n > eps, xy / n.clamp_min(eps), torch.zeros_like(xy))
+
+
+def angle_between_2d(a: Tensor, b: Tensor) -> Tensor:
+    """(N,) unsigned angle between 2-D vectors ``a`` and ``b``, rad in [0, pi]."""
+    cross = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    dot = (a * b).sum(-1)
+    return torch.atan2(cross, dot).abs()

@@ -1,0 +1,261 @@
+"""The ``reach`` task (PULSE Sec. 4.3 / App. C, following ASE): bring the right hand to a target point.
+
+Goal. A 3-D point ``c`` (world frame), resampled after U[``change_steps``) control steps ([CODE]
+``tarChangeSteps`` U[50, 100); the paper does not say) and at every reset:
+
+* ``c_xy = a_xy + U[-xy_range, xy_range]^2`` with ``a`` the anchor (``anchor``): the root's xy at the
+  episode start (default; [CODE] zeroes the root xy at reset and samples in world coordinates, so
+  targets lie around the start position) or the root's xy when the target is sampled;
+  the square is world-axis aligned as in the code;
+* ``c_z ~ U[height_range]``. [P] App. C: "a 2-meter box centered at (0, 0, 1)" = xy in [-1, 1] m,
+  z in [0, 2] m (the main text says "within 1 meter of the humanoid"); [CODE] ``tarDistMax`` 1,
+  ``tarHeightMin/Max`` 0.2 / 2.0.
+
+Observation (3): ``h^-1 (c - p_root)``, the target relative to the root in the heading frame
+(code ``compute_location_observations``).
+
+Reward: ``r = exp(-coefficient * ||p_hand - c||^2)`` in (0, 1], 1 exactly at the target;
+``coefficient`` 5 ([P]) or 4 ([CODE] ``pos_err_scale``). ``body`` is the reaching body (default the
+right hand: ``R_Hand`` on smpl, ``right_hand`` on amp).
+
+Termination: a fall (:class:`~mocap_tasks.common.FallParams`).
+
+Hook: ``step(state)`` (called by the env once per control step after the reward) advances the
+step counters and resamples the targets whose time is up. Without it the target never changes and
+the timing metrics are not defined.
+
+Metrics (since the last :meth:`ReachTask.metrics`). A *goal* is one sampled target; it *finishes*
+when it is resampled or its env is reset; it is *reached* at the first reward computation with
+``||p_hand - c|| <= success_radius``:
+
+* ``distance``: mean hand-target distance over the control steps, m;
+* ``reward``: mean reward over the control steps; ``steps``: their number (a sum);
+* ``success_rate``: fraction of the finished goals (with at least one step) that were reached;
+* ``time_to_reach``: mean time from sampling to reaching over the reached finished goals, s
+  (``steps * dt``; the first step counts as ``dt``);
+* ``final_distance``: mean distance at the last step of each finished goal, m;
+* ``goals``: number of finished goals (a sum). Goal metrics are absent when no goal finished.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+import torch
+from mocap.interfaces import Task
+from mocap.observations import world_to_heading
+from mocap.skeleton import Skeleton
+from mocap.state import SimState
+from mocap_tasks.common import FallParams, TaskBase, resolve_body, rows
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+from torch import Tensor
+
+__all__ = ["ReachParams", "ReachTask", "make_reach", "reach_reward"]
+
+
+class ReachParams(BaseModel):
+    """Parameters of the ``reach`` task (module docstring)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    seed: int = Field(
+        0,
+        description="seed of the task's torch.Generator (target sampling); a factory `seed` argument overrides it",
+    )
+    body: str | None = Field(
+        None,
+        description="the reaching body (default: the right hand, R_Hand / right_hand) ([P] right hand)",
+    )
+    coefficient: float = Field(
+        5.0,
+        gt=0.0,
+        description="r = exp(-coefficient * ||p_hand - c||^2): [P] 5 (App. C), [CODE] 4 (pos_err_scale)",
+    )
+    xy_range: float = Field(
+        1.0,
+        ge=0.0,
+        description="target xy = anchor xy + U[-xy_range, xy_range]^2, m ([P] 2-m box: 1; [CODE] tarDistMax 1.0)",
+    )
+    height_range: tuple[float, float] = Field(
+        (0.0, 2.0),
+        description="target height U[min, max], m: [P] 2-m box centred at z = 1 -> (0, 2); [CODE] tarHeightMin/Max (0.2, 2.0)",
+    )
+    anchor: Literal["initial_root", "current_root"] = Field(
+        "initial_root",
+        description="centre of the sampling box: the root xy at the episode start ([CODE]: root xy zeroed at reset, "
+        "targets sampled around the world origin, also when resampled mid-episode) or the root xy when sampling "
+        "([P] 'within 1 meter of the humanoid')",
+    )
+    change_steps: tuple[int, int] = Field(
+        (50, 100),
+        description="a new target after U[min, max) control steps ([CODE] tarChangeStepsMin/Max 50, 100; [P] not stated)",
+    )
+    success_radius: float = Field(
+        0.1,
+        gt=0.0,
+        description="a goal counts as reached within this hand-target distance, m (metrics only; [DEFAULT], not in the papers)",
+    )
+    termination: FallParams = Field(
+        default_factory=FallParams, description="fall termination"
+    )
+
+    @model_validator(mode="after")
+    def _ranges(self) -> ReachParams:
+        if self.height_range[0] > self.height_range[1]:
+            raise ValueError(
+                f"height_range must be min <= max, got {self.height_range}"
+            )
+        if self.change_steps[0] < 1 or self.change_steps[0] > self.change_steps[1]:
+            raise ValueError(
+                f"change_steps must be 1 <= min <= max, got {self.change_steps}"
+            )
+        return self
+
+
+def reach_reward(hand_pos: Tensor, target: Tensor, coefficient: float = 5.0) -> Tensor:
+    """(N,) ``exp(-coefficient ||hand_pos - target||^2)``."""
+    diff = hand_pos - target
+    return torch.exp(-coefficient * (diff * diff).sum(-1))
+
+
+class ReachTask(TaskBase, Task):
+    """The ``reach`` task (module docstring). Goal: :attr:`target` (N, 3) world points."""
+
+    goal_dim = 3
+    max_reward = 1.0
+
+    def __init__(
+        self,
+        params: ReachParams,
+        *,
+        skeleton: Skeleton,
+        num_envs: int,
+        device: Any = "cpu",
+        seed: int | None = None,
+    ):
+        self.params = params
+        self._setup(
+            params.termination,
+            skeleton,
+            num_envs,
+            device,
+            params.seed if seed is None else seed,
+        )
+        self.sim_overrides = {}
+        self.body_index = resolve_body(skeleton, params.body)
+        N, dev, f64 = self.num_envs, self.device, torch.float64
+        self.target = torch.zeros(N, 3, dtype=f64, device=dev)
+        self.anchor_xy = torch.zeros(N, 2, dtype=f64, device=dev)
+        self.change_at = torch.full(
+            (N,), params.change_steps[0], dtype=torch.long, device=dev
+        )
+        # per-goal bookkeeping for the metrics
+        self.goal_steps = torch.zeros(N, dtype=torch.long, device=dev)
+        self.reached_step = torch.full((N,), -1, dtype=torch.long, device=dev)
+        self.last_distance = torch.zeros(N, dtype=f64, device=dev)
+        self._goal_stats = {"goals": 0.0, "reached": 0.0, "time": 0.0, "final": 0.0}
+
+    # ------------------------------------------------------------------------------ goals
+    def _finish_goals(self, ids: Tensor) -> None:
+        ids = ids[self.goal_steps[ids] > 0]
+        if ids.numel() == 0:
+            return
+        reached = self.reached_step[ids] >= 0
+        g = self._goal_stats
+        g["goals"] += float(ids.numel())
+        g["reached"] += float(reached.sum())
+        g["time"] += float(self.reached_step[ids][reached].double().sum()) * self.dt
+        g["final"] += float(self.last_distance[ids].sum())
+
+    def _sample(self, ids: Tensor, root_xy: Tensor | None) -> None:
+        p = self.params
+        k = int(ids.numel())
+        if root_xy is not None:
+            self.anchor_xy[ids] = root_xy.to(self.anchor_xy)
+        u = self._rand(k, 3)
+        xy = self.anchor_xy[ids] + p.xy_range * (2.0 * u[:, :2] - 1.0)
+        lo, hi = p.height_range
+        z = lo + (hi - lo) * u[:, 2:]
+        self.target[ids] = torch.cat((xy, z), dim=-1)
+        self.change_at[ids] = self.progress[ids] + self._randint(
+            p.change_steps[0], p.change_steps[1], k
+        )
+        self.goal_steps[ids] = 0
+        self.reached_step[ids] = -1
+
+    def reset(self, env_ids: Tensor, state: SimState) -> None:
+        ids = self._ids(env_ids)
+        if ids.numel() == 0:
+            return
+        self._finish_goals(ids)
+        r = rows(state, ids, self.num_envs)
+        self.progress[ids] = 0
+        self._sample(ids, r.root_pos[:, :2].detach().to(self.device))
+
+    def step(self, state: SimState) -> None:
+        """Advance counters and resample the targets whose time is up (module docstring)."""
+        self.progress += 1
+        self.goal_steps += 1
+        due = (self.progress >= self.change_at).nonzero().flatten()
+        if due.numel():
+            self._finish_goals(due)
+            root_xy = (
+                state.root_pos[due, :2].detach().to(self.device)
+                if self.params.anchor == "current_root"
+                else None
+            )
+            self._sample(due, root_xy)
+
+    # ------------------------------------------------------------------------ observation
+    def observe(self, state: SimState) -> Tensor:
+        rel = self.target.to(state.root_pos) - state.root_pos
+        return world_to_heading(state.root_rot, rel)
+
+    # ----------------------------------------------------------------------------- reward
+    def hand_position(self, state: SimState) -> Tensor:
+        return state.body_pos[:, self.body_index]
+
+    def reward(self, state: SimState, actions: Tensor) -> Tensor:
+        hand = self.hand_position(state)
+        target = self.target.to(hand)
+        r = reach_reward(hand, target, self.params.coefficient)
+        dist = torch.linalg.vector_norm(hand - target, dim=-1)
+        new = (self.reached_step < 0) & (
+            dist.to(self.device) <= self.params.success_radius
+        )
+        self.reached_step = torch.where(new, self.goal_steps + 1, self.reached_step)
+        self.last_distance = dist.detach().to(self.last_distance)
+        self._sums.add("distance", dist)
+        self._sums.add("reward", r)
+        self._sums.add("steps", float(r.numel()), count=1)
+        return r
+
+    def terminated(self, state: SimState) -> Tensor:
+        return self._fallen(state)
+
+    def metrics(self) -> dict[str, float]:
+        out = self._sums.pop(totals=("steps",))
+        g = self._goal_stats
+        if g["goals"] > 0:
+            out["goals"] = g["goals"]
+            out["success_rate"] = g["reached"] / g["goals"]
+            out["final_distance"] = g["final"] / g["goals"]
+            if g["reached"] > 0:
+                out["time_to_reach"] = g["time"] / g["reached"]
+        self._goal_stats = {k: 0.0 for k in g}
+        return out
+
+
+def make_reach(
+    params: ReachParams,
+    *,
+    skeleton: Skeleton,
+    num_envs: int,
+    device: Any = "cpu",
+    seed: int | None = None,
+    **_: Any,
+) -> ReachTask:
+    """Registry factory of the ``reach`` task."""
+    return ReachTask(
+        params, skeleton=skeleton, num_envs=num_envs, device=device, seed=seed
+    )
