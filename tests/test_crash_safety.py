@@ -29,7 +29,7 @@ task:
   name: point
   trainer:
     name: ppo
-    params: {num_envs: 16, horizon: 16, total_env_steps: 15360, minibatch_size: 64, epochs: 2,
+    params: {num_envs: 16, horizon: 16, total_env_steps: 8192, minibatch_size: 64, epochs: 2,
              actor_hidden: [16], critic_hidden: [16], checkpoint_every: 2, torch_threads: 1}
 """
 
@@ -50,14 +50,25 @@ def _command(spec: Path, out: Path) -> list[str]:
     return [sys.executable, "-c", RUNNER.format(tests=str(TESTS), spec=str(spec), out=str(out))]
 
 
-def _run(spec: Path, out: Path, kill_after: float | None = None) -> int | None:
+def _logged(out: Path) -> int:
+    try:
+        return sum(1 for line in (out / "metrics.jsonl").read_text().splitlines() if line.strip())
+    except FileNotFoundError:
+        return 0
+
+
+def _run(spec: Path, out: Path, kill_at: int | None = None, delay: float = 0.0) -> int | None:
+    """Run to the end, or SIGKILL the run ``delay`` s after its log reaches ``kill_at`` iterations."""
     env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
     proc = subprocess.Popen(_command(spec, out), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
-    if kill_after is None:
+    if kill_at is None:
         _, err = proc.communicate(timeout=300)
         assert proc.returncode == 0, err.decode()[-2000:]
         return proc.returncode
-    time.sleep(kill_after)
+    deadline = time.monotonic() + 120
+    while _logged(out) < kill_at and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.01)
+    time.sleep(delay)
     proc.send_signal(signal.SIGKILL)
     proc.wait(timeout=60)
     return None
@@ -77,20 +88,20 @@ def test_sigkill_at_random_moments_then_resume(tmp_path: Path):
     killed = tmp_path / "b" / "runs" / "point"
     rng = random.Random(0)
     seen = []
-    for _ in range(4):  # imports take ~2 s; the training ~8 s: kills land before, during and between checkpoints
-        _run(spec, killed, kill_after=rng.uniform(2.0, 7.0))
-        for leftover in (killed.parent / "artifacts").glob("**/*.tmp*"):
-            assert False, f"half-written file left behind: {leftover}"
+    for kill_at in (3, 10, 19, 27):  # after iterations (checkpoints every 2) plus a random delay: any moment
+        _run(spec, killed, kill_at=kill_at, delay=rng.uniform(0.0, 0.3))
         ckpt = next((killed.parent / "artifacts").glob("task-*/ppo.pt"), None)
         if ckpt is not None:
             seen.append(load_checkpoint(ckpt)["iteration"])  # every checkpoint on disk is complete
-    assert any(0 < it < 60 for it in seen), seen  # at least one kill landed mid-training
+    assert len(seen) == 4 and all(0 < it < 32 for it in seen) and seen == sorted(seen), seen  # kills landed mid-training
     _run(spec, killed)
+    leftovers = sorted((killed.parent / "artifacts").glob("**/.*.tmp")) + sorted(killed.glob("**/.*.tmp"))
+    assert not leftovers, f"temporary files of killed writes left behind: {leftovers}"
 
     a, b = load_checkpoint(_task_dir(straight) / "ppo.pt"), load_checkpoint(_task_dir(killed) / "ppo.pt")
-    assert a["iteration"] == b["iteration"] == 60
+    assert a["iteration"] == b["iteration"] == 32
     for key, value in a["model"].items():
         if isinstance(value, torch.Tensor):
             assert torch.equal(value, b["model"][key]), key
     steps = [json.loads(line)["step"] for line in (killed / "metrics.jsonl").read_text().splitlines() if line.strip()]
-    assert steps == list(range(1, 61))
+    assert steps == list(range(1, 33))

@@ -196,13 +196,23 @@ def make_phc(
     device: torch.device | str = "cpu",
 ) -> PHCImitator:
     """Registry factory: an untrained imitator (for ``make_env``) or, with ``checkpoint`` (a policy
-    file of :func:`mocap.rl.networks.save_policy`), the trained one."""
+    file of :func:`mocap.rl.networks.save_policy`), the trained one; a PMCP checkpoint (``pmcp.pt``
+    of the ``pmcp`` trainer) gives a :class:`mocap_phc.pmcp.CompositeImitator`."""
     params = params or PHCParams()
     policy = None
     if checkpoint is not None:
         from mocap.rl.networks import load_policy
 
-        policy = load_policy(Path(checkpoint), map_location=device)
+        try:
+            policy = load_policy(Path(checkpoint), map_location=device)
+        except ValueError:
+            from mocap.checkpoint import load_checkpoint
+            from mocap_phc.pmcp import is_pmcp_checkpoint, make_composite_imitator
+
+            data = load_checkpoint(Path(checkpoint), map_location=device)
+            if not is_pmcp_checkpoint(data):
+                raise
+            return make_composite_imitator(params, skeleton, data, device)
         want = params.observation().dim(skeleton.num_bodies)
         got = getattr(policy, "obs_dim", want)
         if got != want:

@@ -6,6 +6,7 @@ from typing import Any
 
 from mocap.hooks import hookimpl
 from mocap_phc.imitator import PHCParams, make_phc
+from mocap_phc.pmcp import PMCPParams, make_pmcp
 
 
 @hookimpl
@@ -16,4 +17,15 @@ def register_imitators(register: Any) -> None:
         params=PHCParams,
         description="PHC/PHC+ imitator: proprioception + next-frame imitation goal -> PD targets; "
         "RSI, relaxed early termination, hard-negative clip sampling (paper/code switches)",
+    )
+
+
+@hookimpl
+def register_trainers(register: Any) -> None:
+    register(
+        "pmcp",
+        make_pmcp,
+        params=PMCPParams,
+        description="PHC's PMCP in one stage: progressive primitives (each on the clips the previous one fails, until "
+        "plateau), then a composer over the frozen primitives; writes pmcp.pt (a phc checkpoint) and pmcp.md",
     )
