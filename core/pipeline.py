@@ -260,7 +260,7 @@ def run_pipeline(
             record = _run_stage(stage, keys[stage], resolved, plugins, out_dir, store, upstream, device, console, stop)
             records.append(record)
             upstream[stage] = record.result
-            _write_stages(out_dir, records)
+            _write_stages(out_dir, records, spec.seed)
             if stop.requested:
                 raise PipelineInterrupted(stage)
     from mocap.report import write_report
@@ -355,13 +355,14 @@ def _read_result(done: Path) -> StageResult:
     return StageResult(checkpoint=Path(ckpt) if ckpt else None, metrics=data.get("metrics", {}))
 
 
-def _write_stages(out_dir: Path, records: list[StageRecord]) -> None:
+def _write_stages(out_dir: Path, records: list[StageRecord], seed: int | None = None) -> None:
     atomic_write_json(
         out_dir / "stages.json",
         [
             {
                 "stage": r.stage,
                 "key": r.key,
+                "seed": derive_seed(seed, r.stage) if seed is not None else None,
                 "artifact_dir": str(r.workdir),
                 "checkpoint": str(r.result.checkpoint) if r.result.checkpoint else None,
                 "metrics": r.result.metrics,
