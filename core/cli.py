@@ -69,10 +69,14 @@ def cmd_validate(spec: Annotated[Path, typer.Argument(help="spec YAML file")], s
     """Check a spec (structure, plugin names, every component's params) without running it."""
     from mocap.pipeline import stage_keys
 
-    resolved = _load(spec, set_)
-    keys = stage_keys(resolved.spec)
-    stages = ", ".join(f"{s} ({k})" for s, k in keys.items()) or "none"
-    console.print(f"[green]ok[/]: {spec} is a valid spec {resolved.spec.name!r}; stages: {stages}", highlight=False)
+    from mocap.matrix import load_cells
+
+    cells = load_cells(spec, _plugins(), set_ or [])
+    for cell, resolved in cells:
+        keys = stage_keys(resolved.spec)
+        stages = ", ".join(f"{s} ({k})" for s, k in keys.items()) or "none"
+        what = f"cell {cell.name} of {spec}" if cell.name else str(spec)
+        console.print(f"[green]ok[/]: {what} is a valid spec {resolved.spec.name!r}; stages: {stages}", highlight=False)
 
 
 def cmd_run(
@@ -82,11 +86,31 @@ def cmd_run(
     store: Annotated[
         Optional[Path], typer.Option("--store", help="artifact store shared between runs (default: <run dir>/../artifacts)")
     ] = None,
+    jobs: Annotated[int, typer.Option("--jobs", "-j", min=1, help="comparison specs: cells run at the same time (processes)")] = 1,
 ) -> None:
-    """Run a spec: imitator -> latent -> task -> eval, reusing artifacts of identical stages."""
+    """Run a spec: imitator -> latent -> task -> eval, reusing artifacts of identical stages.
+
+    A spec with a ``matrix:`` runs one cell per combination of its values (see mocap.matrix) and
+    writes a comparison table."""
+    from mocap.matrix import comparison, load_cells, run_cells
     from mocap.pipeline import PipelineInterrupted, run_pipeline
 
-    resolved = _load(spec, set_)
+    cells = load_cells(spec, _plugins(), set_ or [])
+    if len(cells) > 1 or cells[0][0].name:
+        out_dir = out or Path("runs") / cells[0][1].spec.name
+        console.print(f"comparison: {len(cells)} cells -> {out_dir}/<cell>/", highlight=False)
+        try:
+            status = run_cells(cells, _plugins(), out_dir, console, jobs=jobs, store=store)
+        except PipelineInterrupted as exc:
+            err_console.print(f"[yellow]interrupted[/] during stage {exc.args[0]!r}; run the same command again to resume.")
+            raise typer.Exit(EXIT_INTERRUPTED) from None
+        comparison([c for c, _ in cells], out_dir)
+        failed = [name for name, s in status.items() if s != "done"]
+        console.print(f"[bold green]done[/]: {len(cells) - len(failed)}/{len(cells)} cells; comparison: {out_dir / 'comparison.md'}", highlight=False)
+        if failed:
+            raise typer.Exit(EXIT_USER_ERROR)
+        return
+    resolved = cells[0][1]
     out_dir = out or Path("runs") / resolved.spec.name
     try:
         records = run_pipeline(resolved, _plugins(), out_dir, store=store, console=console)
@@ -211,3 +235,7 @@ def main(argv: list[str] | None = None) -> int:
             return EXIT_INTERRUPTED
         raise
     return 0
+
+
+if __name__ == "__main__":  # `python -m mocap.cli ...` (used by `mocap run --jobs`)
+    sys.exit(main())

@@ -16,6 +16,7 @@ Run directory (``runs/<spec name>`` unless ``--out``): ``spec.yaml`` (resolved),
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import shutil
@@ -24,7 +25,7 @@ import time
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
 
 import torch
 from pydantic import BaseModel
@@ -270,6 +271,41 @@ def run_pipeline(
 
 
 def _run_stage(
+    stage: str,
+    key: str,
+    resolved: ResolvedSpec,
+    plugins: PluginSet,
+    out_dir: Path,
+    store: Path,
+    upstream: dict[str, StageResult],
+    device: torch.device,
+    console: Console,
+    stop: _StopFlag,
+) -> StageRecord:
+    store.mkdir(parents=True, exist_ok=True)
+    with _stage_lock(store / f".{stage}-{key}.lock", stage, console):
+        return _run_stage_locked(stage, key, resolved, plugins, out_dir, store, upstream, device, console, stop)
+
+
+@contextlib.contextmanager
+def _stage_lock(path: Path, stage: str, console: Console) -> Iterator[None]:
+    """An exclusive lock per artifact: two runs (e.g. cells of a comparison run in parallel) that
+    need the same stage train it once; the second waits and then reuses the artifact."""
+    import fcntl
+
+    with path.open("a") as fh:
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            console.print(f"[yellow]{stage}[/]: another run is training this stage; waiting for it")
+            fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
+def _run_stage_locked(
     stage: str,
     key: str,
     resolved: ResolvedSpec,

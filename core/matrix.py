@@ -1,0 +1,214 @@
+"""Comparison specs: a ``matrix:`` of spec fields that ``mocap run`` expands into one run per cell.
+
+A spec may carry, next to its usual fields::
+
+    matrix:
+      latent:                      # a dotted field path -> the values it takes
+        - {name: scratch}
+        - {name: pulse, params: {...}, checkpoint: ../../checkpoints/pulse_amp/latent.pt}
+      task.name: [speed, reach]
+      seed: [0, 1, 2]
+
+Each cell is the spec with every path set to one of its values (the cartesian product; a value
+replaces what is at the path, like ``--set``; relative ``checkpoint:`` paths inside values are
+relative to the spec file). Cells run one after another, or ``--jobs K`` at a time in separate
+processes, under ``runs/<name>/<cell>/`` with one artifact store ``runs/<name>/artifacts``, so a
+stage that several cells share (the same section and upstream) is trained once: a per-artifact
+lock makes parallel cells wait for each other instead of training it twice.
+
+A cell's name joins ``<last path part>-<label>`` for every axis, where a value's label is its
+``name`` (mappings) or the value itself (scalars), e.g. ``latent-pulse_name-speed_seed-0``.
+``runs/<name>/comparison.md`` / ``.json`` tabulate every cell's final stage metrics and, over the
+``seed`` axis, their mean ± std.
+"""
+
+from __future__ import annotations
+
+import copy
+import itertools
+import json
+import math
+import re
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from mocap.spec import SpecError, SpecIssue, _rebase_paths, apply_overrides, load_document, validate_document
+
+
+@dataclass
+class Cell:
+    name: str  # directory-safe cell name
+    labels: dict[str, str]  # axis path -> label of this cell's value
+    doc: dict[str, Any]  # the cell's spec document (no matrix)
+
+
+def _label(value: Any) -> str:
+    if isinstance(value, dict):
+        return str(value.get("name", "x"))
+    return str(value)
+
+
+def _safe(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.=-]+", "_", text).strip("_") or "x"
+
+
+def _set(doc: dict[str, Any], path: str, value: Any) -> dict[str, Any]:
+    parts = path.split(".")
+    node = doc
+    for part in parts[:-1]:
+        nxt = node.get(part)
+        if not isinstance(nxt, dict):
+            nxt = node[part] = {}
+        node = nxt
+    node[parts[-1]] = copy.deepcopy(value)
+    return doc
+
+
+def expand(doc: dict[str, Any], base_dir: Path, source: str = "<spec>") -> list[Cell]:
+    """The cells of a spec document (one cell named ``""`` when it has no ``matrix``)."""
+    doc = copy.deepcopy(doc)
+    matrix = doc.pop("matrix", None)
+    if matrix is None:
+        return [Cell("", {}, doc)]
+    if not isinstance(matrix, dict) or not matrix:
+        raise SpecError(source, [SpecIssue("matrix", "must be a mapping of field paths to lists of values")])
+    axes = []
+    for path, values in matrix.items():
+        if not isinstance(path, str) or not path or any(not p for p in path.split(".")):
+            raise SpecError(source, [SpecIssue("matrix", f"bad field path {path!r} (use dotted names, e.g. task.name)")])
+        if not isinstance(values, list) or not values:
+            raise SpecError(source, [SpecIssue(f"matrix.{path}", "must be a non-empty list of values")])
+        axes.append((path, values))
+    cells = []
+    for combo in itertools.product(*(values for _, values in axes)):
+        cell_doc = copy.deepcopy(doc)
+        labels = {}
+        for (path, _), value in zip(axes, combo):
+            _set(cell_doc, path, value)
+            labels[path] = _label(value)
+        _rebase_paths(cell_doc, base_dir)
+        name = "_".join(_safe(f"{path.split('.')[-1]}-{labels[path]}") for path, _ in axes)
+        cells.append(Cell(name, labels, cell_doc))
+    names = [c.name for c in cells]
+    if len(set(names)) != len(names):
+        dup = sorted({n for n in names if names.count(n) > 1})
+        raise SpecError(source, [SpecIssue("matrix", f"two cells get the same name {dup}: give mapping values distinct `name`s")])
+    return cells
+
+
+def load_cells(path: Path, plugins: Any, overrides: list[str] | None = None) -> list[tuple[Cell, Any]]:
+    """Expand and validate every cell of a spec file: ``[(cell, ResolvedSpec)]``."""
+    doc = load_document(Path(path))
+    if overrides:
+        doc = apply_overrides(doc, overrides)
+    out = []
+    for cell in expand(doc, Path(path).resolve().parent, str(path)):
+        source = f"{path} (cell {cell.name})" if cell.name else str(path)
+        out.append((cell, validate_document(cell.doc, plugins, source=source, base_dir=Path(path).resolve().parent)))
+    return out
+
+
+# ---------------------------------------------------------------------------------- running
+def run_cells(
+    cells: list[tuple[Cell, Any]], plugins: Any, out_dir: Path, console: Any, jobs: int = 1, store: Path | None = None
+) -> dict[str, str]:
+    """Run every cell (sequentially, or ``jobs`` processes at a time); returns cell -> "done" / error text."""
+    from mocap.pipeline import run_pipeline
+
+    store = store or out_dir / "artifacts"
+    status: dict[str, str] = {}
+    if jobs <= 1:
+        for i, (cell, resolved) in enumerate(cells, 1):
+            console.print(f"[bold]cell {i}/{len(cells)}[/]: {cell.name}")
+            run_pipeline(resolved, plugins, out_dir / cell.name, store=store, console=console)
+            status[cell.name] = "done"
+        return status
+
+    def one(item: tuple[Cell, Any]) -> tuple[str, str]:
+        cell, resolved = item
+        cell_dir = out_dir / cell.name
+        cell_dir.mkdir(parents=True, exist_ok=True)
+        spec_file = cell_dir / "cell.yaml"
+        spec_file.write_text(resolved.to_yaml())
+        with (cell_dir / "run.log").open("w") as log:
+            proc = subprocess.run(
+                [sys.executable, "-m", "mocap.cli", "run", str(spec_file), "--out", str(cell_dir), "--store", str(store)],
+                stdout=log,
+                stderr=subprocess.STDOUT,
+            )
+        return cell.name, "done" if proc.returncode == 0 else f"failed (exit {proc.returncode}; see {cell_dir / 'run.log'})"
+
+    with ThreadPoolExecutor(max_workers=jobs) as pool:
+        for name, result in pool.map(one, cells):
+            console.print(f"cell {name}: {result}")
+            status[name] = result
+    return status
+
+
+# ---------------------------------------------------------------------------------- reports
+def _stage_metrics(cell_dir: Path) -> dict[str, float]:
+    stages_file = cell_dir / "stages.json"
+    if not stages_file.is_file():
+        return {}
+    out: dict[str, float] = {}
+    for stage in json.loads(stages_file.read_text()):
+        for key, value in (stage.get("metrics") or {}).items():
+            if isinstance(value, (int, float)) and not isinstance(value, bool):
+                out[f"{stage['stage']}/{key}"] = float(value)
+    return out
+
+
+def comparison(cells: list[Cell], out_dir: Path, seed_axis: str = "seed") -> dict[str, Any]:
+    """Per-cell final metrics and, grouped over ``seed_axis``, mean and std (written as JSON + markdown)."""
+    rows = {c.name: {"labels": c.labels, "metrics": _stage_metrics(out_dir / c.name)} for c in cells}
+    groups: dict[str, list[str]] = {}
+    for c in cells:
+        key = ", ".join(f"{p.split('.')[-1]}={v}" for p, v in c.labels.items() if p != seed_axis) or "all"
+        groups.setdefault(key, []).append(c.name)
+    summary: dict[str, dict[str, dict[str, float]]] = {}
+    for key, names in groups.items():
+        metric_names = sorted(set().union(*(rows[n]["metrics"].keys() for n in names)))
+        summary[key] = {}
+        for m in metric_names:
+            vals = [rows[n]["metrics"][m] for n in names if m in rows[n]["metrics"]]
+            mean = sum(vals) / len(vals)
+            std = math.sqrt(sum((v - mean) ** 2 for v in vals) / len(vals)) if len(vals) > 1 else 0.0
+            summary[key][m] = {"mean": mean, "std": std, "n": len(vals)}
+    data = {"cells": rows, "groups": summary}
+    (out_dir / "comparison.json").write_text(json.dumps(data, indent=2) + "\n")
+    (out_dir / "comparison.md").write_text(render(summary))
+    return data
+
+
+#: metrics shown in the markdown table when present (all are in comparison.json)
+KEY_METRICS = (
+    "task/episode/normalized_return",
+    "task/episode/return",
+    "task/episode/length",
+    "eval/success_rate",
+    "eval/mpjpe_g",
+    "eval/fall_rate",
+    "eval/diversity_m",
+)
+
+
+def render(summary: dict[str, dict[str, dict[str, float]]]) -> str:
+    present = [m for m in KEY_METRICS if any(m in g for g in summary.values())]
+    if not present:
+        present = sorted(set().union(*(g.keys() for g in summary.values())))[:8]
+    head = ["cell", *present]
+    lines = ["# Comparison", "", "mean ± std over seeds (n = number of runs)", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for key, metrics in summary.items():
+        cells = []
+        for m in present:
+            v = metrics.get(m)
+            cells.append("" if v is None else f"{v['mean']:.3g} ± {v['std']:.2g} (n={v['n']})")
+        lines.append("| " + " | ".join([key, *cells]) + " |")
+    return "\n".join(lines) + "\n"
+
+
+__all__ = ["Cell", "comparison", "expand", "load_cells", "render", "run_cells"]
