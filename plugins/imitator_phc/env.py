@@ -97,17 +97,24 @@ class PHCObservation:
 
     goal: Literal["rot", "keypoint"] = "rot"
     sixd: Literal["zhou", "tan_norm"] = "zhou"
+    recovery: Any = None  # RecoveryGoalParams: far from the reference, imitate its root only (mocap_phc.recovery)
 
     def dim(self, num_bodies: int) -> int:
         return proprioception_dim(num_bodies) + imitation_goal_dim(num_bodies, self.goal)
 
     def __call__(self, state: HumanoidState, ref_next: HumanoidState) -> Observations:
         proprio = proprioception(state, self.sixd)
+        extra: dict[str, Any] = {}
+        if self.recovery is not None:
+            from mocap_phc.recovery import recovery_reference
+
+            ref_next, far = recovery_reference(state, ref_next, self.recovery)
+            extra["recovering"] = far
         goal = imitation_goal(state, ref_next, self.goal, self.sixd)
         return Observations(
             proprio=torch.nan_to_num(proprio.float(), nan=0.0, posinf=0.0, neginf=0.0),
             goal=torch.nan_to_num(goal.float(), nan=0.0, posinf=0.0, neginf=0.0),
-            extra={"ref_dof_pos": ref_next.dof_pos},
+            extra={"ref_dof_pos": ref_next.dof_pos, **extra},
         )
 
     @staticmethod
@@ -254,7 +261,7 @@ class ImitationEnv:
         self.num_envs = N = int(simulator.num_envs)
         self.device = lib.device
         self.dt = float(simulator.dt)
-        self.observation = PHCObservation(p.obs, p.sixd)
+        self.observation = PHCObservation(p.obs, p.sixd, p.recovery_goal)
         self.action_map = ActionMap.for_skeleton(skeleton, p.action, p.action_clip, p.action_scale_overrides)
         self.action_space = self.action_map.space
         self.obs_dim = self.observation.dim(skeleton.num_bodies)

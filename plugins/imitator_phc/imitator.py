@@ -22,6 +22,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from mocap.skeleton import Skeleton
 from mocap_phc.env import ActionMap, ImitationEnv, PHCObservation, PolicyImitator
+from mocap_phc.recovery import RecoveryGoalParams
 from mocap_phc.rewards import DEFAULT_SCALES, DEFAULT_WEIGHTS
 
 
@@ -94,6 +95,11 @@ class PHCParams(BaseModel):
     )
     # ---------------------------------------------------------------------------- episodes
     episode_steps: int = Field(300, ge=1, description="time limit in control steps ([C] 300 = 10 s at 30 Hz); truncation, bootstrapped")
+    recovery_goal: RecoveryGoalParams | None = Field(
+        None,
+        description="fail-state recovery goal (PHC Eq. 3, mocap_phc.recovery): farther than close_distance from the reference root, "
+        "the goal keeps only the root (a point goal); None: always the full imitation goal (PHC primitives)",
+    )
     # ----------------------------------------------------------------------- hard negatives
     hard_negative: bool = Field(
         True, description="PHC+ soft hard-negative mining: clip sampling weights follow per-clip failure counts ([C] auto_pmcp_soft)"
@@ -150,7 +156,7 @@ class PHCParams(BaseModel):
     amp_demo_buffer_size: int = Field(200_000, ge=1, description="demo-window ring buffer, refilled with amp_batch fresh windows per step ([C] 200,000)")
 
     def observation(self) -> PHCObservation:
-        return PHCObservation(self.obs, self.sixd)
+        return PHCObservation(self.obs, self.sixd, self.recovery_goal)
 
     def action_map(self, skeleton: Skeleton) -> ActionMap:
         return ActionMap.for_skeleton(skeleton, self.action, self.action_clip, self.action_scale_overrides)

@@ -1,0 +1,70 @@
+"""PHC's fail-state recovery goal (``mocap_phc.recovery``): close -> the full goal, far -> a point
+goal on the (clamped) reference root, paper vs code velocity handling."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from hypothesis import given
+from hypothesis import strategies as st
+from test_observations import SETTINGS, random_state, seeds
+
+from mocap.observations import imitation_goal_rot
+from mocap.rotations import quat_to_sixd
+from mocap_phc.env import PHCObservation
+from mocap_phc.recovery import RecoveryGoalParams, recovery_reference
+
+B = 5
+
+
+def _goal_parts(goal: torch.Tensor) -> dict[str, torch.Tensor]:
+    g = goal.reshape(goal.shape[0], B, 24)
+    return {"pos": g[..., 0:3], "rot": g[..., 3:9], "vel": g[..., 9:12], "ang": g[..., 12:15], "ref_pos": g[..., 15:18]}
+
+
+@SETTINGS
+@given(seeds, st.sampled_from(["paper", "code"]), st.floats(0.6, 12.0))
+def test_far_goal_is_a_point_goal_on_the_clamped_root(seed, form, distance):
+    rng = np.random.default_rng(seed)
+    state, ref = random_state(rng, 4, B), random_state(rng, 4, B)
+    # env 0 close (0.1 m), the others `distance` away from the simulated root
+    direction = torch.nn.functional.normalize(torch.as_tensor(rng.standard_normal((4, 3))), dim=-1)
+    gap = torch.tensor([0.1, distance, distance, distance], dtype=torch.float64)
+    shift = state.root_pos + direction * gap[:, None] - ref.root_pos
+    ref.body_pos = ref.body_pos + shift[:, None, :]
+    ref.root_pos = ref.body_pos[:, 0].clone()
+    params = RecoveryGoalParams(form=form, close_distance=0.5, far_distance=5.0)
+    masked, far = recovery_reference(state, ref, params)
+    assert far.tolist() == [False, True, True, True]
+    for name in ("body_pos", "body_rot", "body_lin_vel", "body_ang_vel", "dof_pos"):
+        assert torch.equal(getattr(masked, name)[0], getattr(ref, name)[0]), name  # the close env is untouched
+    # far: the reference root pulled to at most far_distance, its rotation kept
+    reach = torch.linalg.vector_norm(masked.root_pos[1:] - state.root_pos[1:], dim=-1)
+    assert torch.allclose(reach, torch.full((3,), min(distance, 5.0), dtype=torch.float64), atol=1e-9)
+    assert torch.equal(masked.body_rot[1:, 0], ref.body_rot[1:, 0])
+    parts = _goal_parts(imitation_goal_rot(state, masked))
+    identity6 = quat_to_sixd(torch.tensor([1.0, 0.0, 0.0, 0.0], dtype=torch.float64))
+    assert torch.allclose(parts["pos"][1:, 1:], torch.zeros(3, B - 1, 3, dtype=torch.float64), atol=1e-9)
+    assert torch.allclose(parts["rot"][1:, 1:], identity6.expand(3, B - 1, 6), atol=1e-6)
+    assert torch.allclose(parts["vel"][1:, 1:], torch.zeros(3, B - 1, 3, dtype=torch.float64), atol=1e-9)
+    root_vel_zero = torch.allclose(parts["vel"][1:, 0], torch.zeros(3, 3, dtype=torch.float64), atol=1e-9)
+    assert root_vel_zero == (form == "code")  # the paper keeps the reference root's velocity
+    assert torch.linalg.vector_norm(parts["pos"][1:, 0], dim=-1).max() > 0.5  # the point goal itself
+
+
+def test_observation_reports_recovering_envs_and_keeps_shapes():
+    rng = np.random.default_rng(0)
+    state, ref = random_state(rng, 3, B), random_state(rng, 3, B)
+    plain = PHCObservation()(state, ref)
+    rec = PHCObservation(recovery=RecoveryGoalParams(close_distance=1e-3))(state, ref)
+    assert rec.goal.shape == plain.goal.shape and bool(rec.extra["recovering"].all())
+    assert not torch.allclose(rec.goal, plain.goal)
+    never = PHCObservation(recovery=RecoveryGoalParams(close_distance=1e6))(state, ref)
+    assert torch.equal(never.goal, plain.goal) and not bool(never.extra["recovering"].any())
+
+
+def test_params_validate():
+    with pytest.raises(ValueError):
+        RecoveryGoalParams(close_distance=0.0)
+    assert RecoveryGoalParams(form="code", close_distance=0.25, far_distance=3.0).far_distance == 3.0
