@@ -47,6 +47,8 @@ class Cell:
 
 
 def _label(value: Any) -> str:
+    if value is None:
+        return "none"
     if isinstance(value, dict):
         return str(value.get("name", "x"))
     return str(value)

@@ -8,6 +8,7 @@ import pytest
 import torch
 from hypothesis import given
 from hypothesis import strategies as st
+from test_distill import walk  # noqa: F401  (fixture)
 from test_observations import SETTINGS, random_state, seeds
 
 from mocap.observations import imitation_goal_rot
@@ -68,3 +69,52 @@ def test_params_validate():
     with pytest.raises(ValueError):
         RecoveryGoalParams(close_distance=0.0)
     assert RecoveryGoalParams(form="code", close_distance=0.25, far_distance=3.0).far_distance == 3.0
+
+
+# ------------------------------------------------------------------------------- fail states
+def _env(amp, walk, fail, n=4, recovery_goal=None):
+    from mocap.motion.library import MotionLibrary
+    from mocap_phc.env import ImitationEnv
+    from mocap_phc.imitator import PHCParams
+    from mocap_sim_mujoco.simulator import MujocoSimulator
+
+    params = PHCParams(action="residual", fail_states=fail, recovery_goal=recovery_goal, hard_negative=False, eval_every=0)
+    return ImitationEnv(params, amp, MotionLibrary(walk, amp), MujocoSimulator(skeleton=amp, num_envs=n, seed=0), seed=3)
+
+
+def test_fallen_starts_lie_on_the_ground_and_get_a_grace_window(amp, walk):  # noqa: F811
+    from mocap_phc.recovery import FailStateParams
+
+    env = _env(amp, walk, FailStateParams(fall_init_prob=1.0, recovery_steps=10, settle_steps=40), recovery_goal=RecoveryGoalParams())
+    env.reset()
+    s = env.sim.state
+    assert bool((s.root_pos[:, 2] < 0.5).all()), s.root_pos  # lying, not standing (the reference root is ~0.9 m)
+    ref_xy = env._ref_next.root_pos[:, :2]
+    assert torch.allclose(s.root_pos[:, :2].double(), ref_xy.double(), atol=0.15)  # at the reference's place
+    assert bool((env.recovery_left == 10).all())
+    zero = torch.zeros(4, amp.num_dofs)
+    for _ in range(9):  # far from the reference pose, but inside the grace window: no termination
+        assert not bool(env.step(zero).terminated.any())
+    ended = False
+    for _ in range(5):
+        ended |= bool(env.step(zero).terminated.any())
+    assert ended  # after the window the tracking termination is back
+
+
+def test_far_starts_and_exact_resume(amp, walk):  # noqa: F811
+    from mocap_phc.recovery import FailStateParams
+
+    fs = FailStateParams(fall_init_prob=0.5, far_init_prob=1.0, far_init_range=(2.0, 3.0), recovery_steps=5, settle_steps=20)
+    a, b = _env(amp, walk, fs), _env(amp, walk, fs)
+    a.reset()
+    d = torch.linalg.vector_norm((a.sim.state.root_pos - a._ref_next.root_pos)[:, :2].double(), dim=-1)
+    far = d > 1.5
+    assert bool(far.any()) and bool(((d[far] > 1.9) & (d[far] < 3.2)).all()), d
+    g = torch.Generator().manual_seed(0)
+    acts = [0.2 * torch.randn(4, amp.num_dofs, generator=g) for _ in range(16)]
+    for x in acts[:8]:
+        a.step(x)
+    b.load_state_dict(a.state_dict())
+    for x in acts[8:]:
+        ra, rb = a.step(x), b.step(x)
+        assert torch.equal(ra.obs, rb.obs) and torch.equal(ra.reward, rb.reward) and torch.equal(ra.terminated, rb.terminated)

@@ -60,7 +60,7 @@ from __future__ import annotations
 
 import fnmatch
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING, Any, Callable, Literal
 
 import numpy as np
@@ -291,6 +291,13 @@ class ImitationEnv:
         self._ref_next: MotionFrames | None = None
         self._obs: Tensor | None = None
         self.last_evaluation: dict[str, Any] | None = None
+        self.recovery_left = torch.zeros(N, dtype=torch.long, device=dev)
+        self._fall_pool: HumanoidState | None = None
+        fs = p.fail_states
+        if fs is not None and fs.fall_init_prob > 0:
+            from mocap_phc.recovery import generate_fall_states
+
+            self._fall_pool = generate_fall_states(self.sim, skeleton, fs.pool_size or N, fs, self._gen)
 
         self.amp_obs: AMPObservation | None = None
         self.amp_history: AMPHistory | None = None
@@ -349,9 +356,45 @@ class ImitationEnv:
         self.start_time[ids] = t0
         self.progress[ids] = 0
         self.ep_return[ids] = 0.0
-        self.sim.reset(ids, self.library.frames(clips, t0))
+        start = self.library.frames(clips, t0)
+        self.recovery_left[ids] = 0
+        fs = self.params.fail_states
+        if fs is not None and (fs.fall_init_prob > 0 or fs.far_init_prob > 0):
+            start = self._fail_starts(ids, start, fs)
+        self.sim.reset(ids, start)
         if self.amp_history is not None:
             self._amp_fill(ids, self.sim.state.index(ids), clips, t0)
+
+    def _fail_starts(self, ids: Tensor, start: MotionFrames, fs: Any) -> HumanoidState:
+        """Replace some RSI starts by fallen states (at the reference root's xy) or far ones."""
+        from mocap_phc.recovery import moved
+
+        n = int(ids.numel())
+        u = torch.rand(n, generator=self._gen, dtype=torch.float64)
+        v = torch.rand(n, generator=self._gen, dtype=torch.float64)
+        fall = (u < fs.fall_init_prob) if self._fall_pool is not None else torch.zeros(n, dtype=torch.bool)
+        far = ~fall & (v < fs.far_init_prob)
+        state: HumanoidState = HumanoidState(**{f.name: getattr(start, f.name).clone() for f in fields(HumanoidState)})
+        if bool(far.any()):
+            k = int(far.sum())
+            lo, hi = fs.far_init_range
+            radius = lo + (hi - lo) * torch.rand(k, generator=self._gen, dtype=torch.float64)
+            angle = 2 * math.pi * torch.rand(k, generator=self._gen, dtype=torch.float64)
+            shift = torch.stack([radius * torch.cos(angle), radius * torch.sin(angle), torch.zeros(k, dtype=torch.float64)], -1)
+            sub = moved(state.index(far.nonzero().squeeze(-1)), shift.to(state.root_pos))
+            _assign_rows(state, far.nonzero().squeeze(-1), sub)
+        if bool(fall.any()):
+            assert self._fall_pool is not None
+            k = int(fall.sum())
+            pick = torch.randint(0, self._fall_pool.num_envs, (k,), generator=self._gen)
+            pool = self._fall_pool.index(pick)
+            rows = fall.nonzero().squeeze(-1)
+            shift = torch.zeros(k, 3, dtype=state.root_pos.dtype)
+            shift[:, :2] = state.root_pos[rows, :2].cpu() - pool.root_pos[:, :2].to(shift)
+            pool = moved(HumanoidState(**{f.name: getattr(pool, f.name).to(state.root_pos.device, state.root_pos.dtype) for f in fields(HumanoidState)}), shift.to(state.root_pos.device))
+            _assign_rows(state, rows, pool)
+        self.recovery_left[ids[fall | far]] = int(fs.recovery_steps)
+        return state
 
     def _amp_fill(self, ids: Tensor, state: HumanoidState, clips: Tensor, t0: Tensor) -> None:
         """Episode-start AMP window of envs ``ids``: ``state`` newest, the reference before ``t0`` older."""
@@ -402,6 +445,10 @@ class ImitationEnv:
         else:
             reward = (r_im + energy).double()
         terminated, parts = self.termination(state, ref, self.progress)
+        if p.fail_states is not None:  # a fallen or far start has a grace window to recover in
+            grace = self.recovery_left > 0
+            terminated = terminated & (~grace | parts["unstable"])
+            self.recovery_left = (self.recovery_left - 1).clamp_min(0)
         reward = torch.where(parts["unstable"] | ~torch.isfinite(reward), torch.zeros_like(reward), reward)
         t_next = self.start_time + (self.progress + 1).to(torch.float64) * self.dt
         clip_over = ~self._loops[self.clip_ids] & (t_next > self._durations[self.clip_ids] + 1e-6)
@@ -578,6 +625,7 @@ class ImitationEnv:
             "start_time": self.start_time.cpu().clone(),
             "progress": self.progress.cpu().clone(),
             "ep_return": self.ep_return.cpu().clone(),
+            "recovery_left": self.recovery_left.cpu().clone(),
             **self.failures.state_dict(),
         }
         if self.amp_trainer is not None:
@@ -603,6 +651,8 @@ class ImitationEnv:
         self.start_time = state["start_time"].to(dev).clone()
         self.progress = state["progress"].to(dev).clone()
         self.ep_return = state["ep_return"].to(dev).clone()
+        if "recovery_left" in state:
+            self.recovery_left = state["recovery_left"].to(dev).clone()
         self.failures.load_state_dict(state)
         if self.amp_trainer is not None:
             assert self.amp_history is not None

@@ -22,7 +22,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from mocap.skeleton import Skeleton
 from mocap_phc.env import ActionMap, ImitationEnv, PHCObservation, PolicyImitator
-from mocap_phc.recovery import RecoveryGoalParams
+from mocap_phc.recovery import FailStateParams, RecoveryGoalParams
 from mocap_phc.rewards import DEFAULT_SCALES, DEFAULT_WEIGHTS
 
 
@@ -95,6 +95,10 @@ class PHCParams(BaseModel):
     )
     # ---------------------------------------------------------------------------- episodes
     episode_steps: int = Field(300, ge=1, description="time limit in control steps ([C] 300 = 10 s at 30 Hz); truncation, bootstrapped")
+    fail_states: FailStateParams | None = Field(
+        None,
+        description="fallen and far episode starts with a grace window (PHC+ fail-state recovery, mocap_phc.recovery); None: RSI only",
+    )
     recovery_goal: RecoveryGoalParams | None = Field(
         None,
         description="fail-state recovery goal (PHC Eq. 3, mocap_phc.recovery): farther than close_distance from the reference root, "

@@ -4,8 +4,10 @@
 the weights). Its :meth:`~VmpLatent.encoder` reads ``obs.extra["window"]``: (N, 2W+1, F)
 heading-normalized, **unstandardized** features as :meth:`~VmpLatent.windows` computes them from a
 motion library; it standardizes them itself. The decoder of the LatentSpace interface (PD targets
-from proprioception and z) is VMP's stage II tracking policy, which is not built yet: calling it
-raises :class:`NotImplementedError`. The VAE's own window decoder is :meth:`~VmpLatent.decode_window`.
+from proprioception and z) is VMP's stage II tracking policy, which also needs the reference frame
+m_t, so it is not this method (calling it raises :class:`NotImplementedError`) but
+:class:`mocap_vmp.tracking.VmpImitator`, trained by the ``vmp_track`` trainer. The VAE's own window
+decoder is :meth:`~VmpLatent.decode_window`.
 """
 
 from __future__ import annotations
@@ -84,6 +86,8 @@ class VmpLatent(LatentSpace):
         #: (total_frames, d_z) per-frame latents of the training library (set after training / loading)
         self.frame_latents: Tensor | None = None
         self.clip_names: list[str] = []
+        #: the vmp_track trainer's tracking policy entry of a combined vmp.pt (None for stage-1-only files)
+        self.tracker: dict[str, Any] | None = None
 
     @property
     def config(self) -> dict[str, Any]:
@@ -127,8 +131,8 @@ class VmpLatent(LatentSpace):
 
     def decoder(self, obs: Observations, z: Tensor) -> Tensor:
         raise NotImplementedError(
-            "vmp: the decoder to PD targets is VMP's stage II tracking policy, which is not built yet; only stage I "
-            "(the motion VAE: encoder, prior, VmpLatent.decode_window) exists"
+            "vmp: the decoder to PD targets is VMP's stage II tracking policy, which also needs the reference frame m_t: "
+            "train it with the vmp_track trainer and build it with mocap_vmp.tracking.vmp_imitator"
         )
 
     def prior(self, obs: Observations) -> LatentSample:
@@ -174,8 +178,10 @@ def make_vmp(
     checkpoint: str | Path | None = None,
     device: torch.device | str = "cpu",
 ) -> VmpLatent:
-    """Registry factory: an untrained VMP latent, or with ``checkpoint`` (the trainer's ``vae.pt`` or its
-    resumable ``vmp.pt``) the trained one with its per-frame latents, in eval mode."""
+    """Registry factory: an untrained VMP latent, or with ``checkpoint`` (the supervised trainer's ``vae.pt``
+    or its resumable ``vmp.pt``, or the ``vmp_track`` trainer's combined ``vmp.pt``) the trained one with
+    its per-frame latents, in eval mode. A combined file's tracking policy is kept, unbuilt, in
+    ``latent.tracker`` (a dict; None otherwise): build it with :func:`mocap_vmp.tracking.vmp_imitator`."""
     params = params or VmpParams()
     latent = VmpLatent(params, skeleton)
     if checkpoint is not None:
@@ -196,6 +202,7 @@ def make_vmp(
             raise ValueError(f"{checkpoint}: not the weights of this vmp latent ({exc})") from None
         latent.frame_latents = saved.get("frame_latents")
         latent.clip_names = list(saved.get("clip_names") or [])
+        latent.tracker = saved.get("tracker")
         latent.eval()
     return latent.to(device)
 
