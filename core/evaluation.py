@@ -450,7 +450,7 @@ def _from_file(target: Path, plugins: Any) -> EvalTarget:
     resolved = validate_document(yaml.safe_load(spec_yaml), plugins, source=f"{target} (embedded spec)")
     from mocap.distill import CHECKPOINT_FORMAT as DISTILL_FORMAT, LATENT_FORMAT
 
-    if data.get("format") in (LATENT_FORMAT, DISTILL_FORMAT):
+    if data.get("format") in (LATENT_FORMAT, DISTILL_FORMAT) or (resolved.spec.imitator is None and resolved.spec.latent is not None):
         teacher = _stage_checkpoint(resolved.spec, "imitator")
         return _check(EvalTarget(resolved, teacher, target), target)
     return _check(EvalTarget(resolved, target), target)
@@ -460,11 +460,11 @@ def _check(t: EvalTarget, source: Path) -> EvalTarget:
     from mocap.cli import UserError
 
     spec = t.spec
-    if spec.imitator is None:
+    if spec.imitator is None and t.latent_checkpoint is None:
         raise UserError(f"{source}: its spec has no imitator")
     if t.latent_checkpoint is not None and spec.latent is None:
         raise UserError(f"{source}: a latent checkpoint, but its spec has no latent stage")
-    if t.latent_checkpoint is not None and t.imitator_checkpoint is None and spec.imitator.name not in ("pd_replay",):
+    if t.latent_checkpoint is not None and t.imitator_checkpoint is None and spec.imitator is not None and spec.imitator.name not in ("pd_replay",):
         raise UserError(f"{source}: the latent's imitator has no checkpoint (the spec names none, and no run records one)")
     for path in (t.imitator_checkpoint, t.latent_checkpoint):
         if path is not None and not Path(path).is_file():
@@ -499,8 +499,8 @@ def load_evaluation_target(target: Path, plugins: Any) -> EvalTarget:
             for stage in json.loads(stages_file.read_text()):
                 if stage["stage"] in ("imitator", "latent") and stage.get("checkpoint"):
                     found[stage["stage"]] = Path(stage["checkpoint"])
-            if resolved.spec.imitator is None:
-                raise UserError(f"{spec_file}: the run has no imitator stage to evaluate")
+            if resolved.spec.imitator is None and "latent" not in found:
+                raise UserError(f"{spec_file}: the run has no imitator or trained latent stage to evaluate")
             from mocap.pipeline import stage_keys
 
             keys = stage_keys(resolved.spec)
@@ -542,6 +542,25 @@ def build_evaluation_target(
     else:
         source = plugins.get("motion_source", motions).build({})
     lib = MotionLibrary(source.load(skeleton), skeleton)
+    sim_component = plugins.get("simulator", spec.simulator.name)
+    sim_params = resolved.params.get("simulator")
+
+    def make_sim(n: int) -> Simulator:
+        return sim_component.build(sim_params, skeleton=skeleton, num_envs=n, seed=spec.seed)
+
+    if spec.imitator is None:  # a latent space that imitates on its own (VMP's tracker)
+        from mocap.cli import UserError
+
+        latent = plugins.get("latent", spec.latent.name).build(
+            resolved.params.get("latent"), skeleton=skeleton, checkpoint=target.latent_checkpoint, device=device
+        )
+        probe = make_sim(1)
+        dt = float(probe.dt)
+        probe.close()
+        own = latent.as_imitator(lib, dt=dt, device=device) if callable(getattr(latent, "as_imitator", None)) else None
+        if own is None:
+            raise UserError(f"{target.latent_checkpoint}: the {spec.latent.name} latent has no imitator of its own and the spec names none")
+        return LoadedTarget(target, skeleton, lib, own, latent, "pd_targets", own, make_sim)
     imitator = plugins.get("imitator", spec.imitator.name).build(
         resolved.params.get("imitator"), skeleton=skeleton, checkpoint=target.imitator_checkpoint, device=device
     )
@@ -552,12 +571,6 @@ def build_evaluation_target(
         )
         label = str(load_latent_state(target.latent_checkpoint)["extra"].get("label", "policy_output"))
         policy = latent_imitator(PDTargetTeacher(imitator) if label == "pd_targets" else imitator, latent)
-    sim_component = plugins.get("simulator", spec.simulator.name)
-    sim_params = resolved.params.get("simulator")
-
-    def make_sim(n: int) -> Simulator:
-        return sim_component.build(sim_params, skeleton=skeleton, num_envs=n, seed=spec.seed)
-
     return LoadedTarget(target, skeleton, lib, imitator, latent, label, policy, make_sim)
 
 
@@ -594,7 +607,10 @@ def register_commands(app):  # type: ignore[no-untyped-def]
         target_info = load_evaluation_target(target, plugins)
         loaded = build_evaluation_target(target_info, plugins, motions=motions, use_latent=not imitator_only)
         spec, lib, imitator, make_sim = target_info.spec, loaded.library, loaded.policy, loaded.make_sim
-        what = f"{spec.latent.name} latent (z = encoder mean)" if loaded.latent is not None else spec.imitator.name
+        if spec.imitator is None:
+            what = f"{spec.latent.name} (its own tracking policy)"
+        else:
+            what = f"{spec.latent.name} latent (z = encoder mean)" if loaded.latent is not None else spec.imitator.name
         checkpoint = target_info.latent_checkpoint if loaded.latent is not None else target_info.imitator_checkpoint
 
         params = ImitationEvalParams(num_envs=num_envs, horizon=loop, video=False)
@@ -614,7 +630,7 @@ def register_commands(app):  # type: ignore[no-untyped-def]
         stdout = Console(width=None if sys.stdout.isatty() else 160)
         stdout.print(out)
         stdout.print(f"success rate {100 * agg['success_rate']:.1f}% ({agg['succeeded']}/{agg['total']}); {PROTOCOL}")
-        if loaded.latent is not None:
+        if loaded.latent is not None and spec.imitator is not None:
             # PULSE Table 1 layout: the latent next to the imitator it was distilled from.
             teacher = evaluate_imitator(loaded.imitator, lib, make_sim, params, default_metrics(), console)
             table["imitator"] = teacher

@@ -520,6 +520,12 @@ def test_mocap_run_vmp_track_produces_vmp_pt(amp, lib, tmp_path):
     assert out_r.traj.sim.shape[0] == 6
     assert joint_mae_deg(out_r.traj, amp).shape == (2,)
     sim.close()
+    # `mocap eval` of the run directory and of the file: the tracker through the imitation protocol
+    for target in (out, vmp_file):
+        ev = invoke(["eval", target, "--json", tmp_path / "e.json"])
+        assert ev.exit_code == 0, ev.output
+        table = json.loads((tmp_path / "e.json").read_text())
+        assert table["evaluated"].startswith("vmp (its own tracking policy)") and table["aggregate"]["total"] == 1
     # a stage-1-only checkpoint still loads
     stage1 = make_vmp(VmpParams(**TINY), skeleton=amp, checkpoint=vmp_file.parent / "vae" / "vae.pt")
     assert stage1.tracker is None

@@ -88,6 +88,16 @@ class VmpLatent(LatentSpace):
         self.clip_names: list[str] = []
         #: the vmp_track trainer's tracking policy entry of a combined vmp.pt (None for stage-1-only files)
         self.tracker: dict[str, Any] | None = None
+        self.checkpoint_path: Path | None = None
+
+    def as_imitator(self, library: Any, dt: float | None = None, device: Any = "cpu") -> Any:
+        """The trained tracking policy (stage 2) as an Imitator over ``library`` (``mocap eval`` uses
+        it for a spec whose latent space imitates on its own), or None for a stage-1-only latent."""
+        if self.tracker is None or self.checkpoint_path is None:
+            return None
+        from mocap_vmp.tracking import vmp_imitator
+
+        return vmp_imitator(self.checkpoint_path, self.skeleton, library, device=device, dt=dt)
 
     @property
     def config(self) -> dict[str, Any]:
@@ -203,6 +213,7 @@ def make_vmp(
         latent.frame_latents = saved.get("frame_latents")
         latent.clip_names = list(saved.get("clip_names") or [])
         latent.tracker = saved.get("tracker")
+        latent.checkpoint_path = Path(checkpoint)
         latent.eval()
     return latent.to(device)
 
