@@ -36,11 +36,12 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
 
     The data goes to a temporary sibling ``.<name>.*.tmp`` that is renamed over ``path``. A process
     killed mid-write (SIGKILL, power loss) leaves only such a temporary behind; the next successful
-    write of the same path removes it.
+    write of the same path removes it (temporaries carry their writer's pid, so another live
+    process writing the same path concurrently keeps its own).
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
@@ -51,7 +52,25 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
         Path(tmp).unlink(missing_ok=True)
         raise
     for stale in path.parent.glob(f".{path.name}.*.tmp"):  # left by an earlier writer that was killed
-        stale.unlink(missing_ok=True)
+        if not _writer_alive(stale.name[len(path.name) + 2 :].split(".", 1)[0]):
+            stale.unlink(missing_ok=True)
+
+
+def _writer_alive(pid_text: str) -> bool:
+    """Whether the process that named a temporary file (by its pid) still runs (unknown: assume so)."""
+    try:
+        pid = int(pid_text)
+    except ValueError:
+        return True
+    if pid == os.getpid():
+        return False  # our own earlier write of this path finished or failed: nothing is writing it now
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
 
 
 def atomic_write_text(path: Path, text: str) -> None:
