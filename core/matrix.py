@@ -192,7 +192,11 @@ KEY_METRICS = (
     "task/episode/return",
     "task/episode/length",
     "eval/success_rate",
+    "eval/succeeded",
     "eval/mpjpe_g",
+    "eval/mpjpe_g_succ",
+    "eval/mpjpe_l",
+    "eval/rot_err",
     "eval/fall_rate",
     "eval/diversity_m",
 )
@@ -203,12 +207,17 @@ def render(summary: dict[str, dict[str, dict[str, float]]]) -> str:
     if not present:
         present = sorted(set().union(*(g.keys() for g in summary.values())))[:8]
     head = ["cell", *present]
-    lines = ["# Comparison", "", "mean ± std over seeds (n = number of runs)", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines = ["# Comparison", "", "final stage metrics per cell; mean ± std over seeds where a cell has several runs (n)", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for key, metrics in summary.items():
         cells = []
         for m in present:
             v = metrics.get(m)
-            cells.append("" if v is None else f"{v['mean']:.3g} ± {v['std']:.2g} (n={v['n']})")
+            if v is None:
+                cells.append("")
+            elif v["n"] == 1:
+                cells.append(f"{v['mean']:.3g}")
+            else:
+                cells.append(f"{v['mean']:.3g} ± {v['std']:.2g} (n={v['n']})")
         lines.append("| " + " | ".join([key, *cells]) + " |")
     return "\n".join(lines) + "\n"
 
