@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
+from mocap.matrix import load_cells
 from mocap.plugins import get_plugins
-from mocap.spec import load_spec
 
 ROOT = Path(__file__).resolve().parents[1]
 SPECS = sorted((ROOT / "specs").rglob("*.yaml"))
@@ -19,5 +19,10 @@ def test_there_are_specs():
 
 @pytest.mark.parametrize("path", SPECS, ids=[str(p.relative_to(ROOT)) for p in SPECS])
 def test_shipped_spec_validates(path: Path):
-    resolved = load_spec(path, get_plugins())
-    assert resolved.spec.name
+    cells = load_cells(path, get_plugins())  # every cell of a comparison spec
+    assert cells and all(resolved.spec.name for _, resolved in cells)
+    for _, resolved in cells:  # stage checkpoints a shipped spec names are committed
+        for stage in ("imitator", "latent", "task"):
+            section = getattr(resolved.spec, stage)
+            if section is not None and section.checkpoint is not None:
+                assert Path(section.checkpoint).is_file(), f"{path}: {stage}.checkpoint {section.checkpoint} is missing"
