@@ -71,7 +71,7 @@ from mocap.pipeline import StageFailed
 from mocap.progress import IterationProgress
 from mocap.latent_imitator import LatentImitator, PDTargetTeacher, observations_to
 from mocap.motion.library import MotionLibrary
-from mocap.state import HumanoidState, MotionFrames, Observations, SimState
+from mocap.state import HUMANOID_FIELDS, HumanoidState, MotionFrames, Observations, SimState
 
 CHECKPOINT_FORMAT = "mocap.distill/1"
 CHECKPOINT_NAME = "distill.pt"
@@ -204,18 +204,7 @@ def _set_rng_state(state: dict[str, Any]) -> None:
         torch.cuda.set_rng_state_all(state["cuda"])
 
 
-_HUMANOID_FIELDS = (
-    "root_pos",
-    "root_rot",
-    "root_lin_vel",
-    "root_ang_vel",
-    "dof_pos",
-    "dof_vel",
-    "body_pos",
-    "body_rot",
-    "body_lin_vel",
-    "body_ang_vel",
-)
+_HUMANOID_FIELDS = HUMANOID_FIELDS
 
 
 class DistillEpisodes:

@@ -59,6 +59,10 @@ class HumanoidState:
         return replace(self, **{f.name: _to(getattr(self, f.name), device) for f in fields(self)})
 
 
+#: the tensor fields of :class:`HumanoidState`, in declaration order
+HUMANOID_FIELDS: tuple[str, ...] = tuple(f.name for f in fields(HumanoidState))
+
+
 @dataclass
 class SimState(HumanoidState):
     """A simulator's batched state: a :class:`HumanoidState` plus contact information.

@@ -74,7 +74,7 @@ from mocap.motion.library import MotionLibrary
 from mocap.observations import imitation_goal, imitation_goal_dim, proprioception, proprioception_dim
 from mocap.rl.env import StepResult
 from mocap.skeleton import Skeleton
-from mocap.state import HumanoidState, MotionFrames, Observations, SimState
+from mocap.state import HUMANOID_FIELDS, HumanoidState, MotionFrames, Observations, SimState
 from mocap_phc.amp import AMPHistory, AMPObservation, DiscriminatorTrainer, demo_windows, loss_config, window_frames
 from mocap_phc.rewards import ImitationReward, energy_penalty
 from mocap_phc.termination import Termination
@@ -680,18 +680,7 @@ class ImitationEnv:
         return self._obs.clone()
 
 
-_HUMANOID_FIELDS = (
-    "root_pos",
-    "root_rot",
-    "root_lin_vel",
-    "root_ang_vel",
-    "dof_pos",
-    "dof_vel",
-    "body_pos",
-    "body_rot",
-    "body_lin_vel",
-    "body_ang_vel",
-)
+_HUMANOID_FIELDS = HUMANOID_FIELDS
 
 
 def _assign_rows(dst: HumanoidState, ids: Tensor, src: HumanoidState) -> None:

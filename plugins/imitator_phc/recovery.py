@@ -26,7 +26,7 @@ import torch
 from pydantic import BaseModel, ConfigDict, Field
 from torch import Tensor
 
-from mocap.state import HumanoidState
+from mocap.state import HUMANOID_FIELDS, HumanoidState
 
 
 class RecoveryGoalParams(BaseModel):
@@ -38,7 +38,7 @@ class RecoveryGoalParams(BaseModel):
     far_distance: float = Field(5.0, gt=0, description="the reference root is pulled to at most this distance, m ([P] 5; [C] 3)")
 
 
-_FIELDS = ("root_pos", "root_rot", "root_lin_vel", "root_ang_vel", "dof_pos", "dof_vel", "body_pos", "body_rot", "body_lin_vel", "body_ang_vel")
+_FIELDS = HUMANOID_FIELDS
 
 
 def recovery_reference(
@@ -150,15 +150,14 @@ def generate_fall_states(sim: Any, skeleton: Any, count: int, params: FailStateP
             state = sim.step(targets)
         take = min(n_env, count - done)
         s = state.index(torch.arange(take))
-        s = HumanoidState(**{f: getattr(s, f).clone() for f in _STATE_FIELDS})
+        s = HumanoidState(**{f: getattr(s, f).clone() for f in _FIELDS})
         for f in _VEL_FIELDS:
             getattr(s, f).zero_()
         chunks.append(s)
         done += take
-    return HumanoidState(**{f: torch.cat([getattr(c, f) for c in chunks]) for f in _STATE_FIELDS})
+    return HumanoidState(**{f: torch.cat([getattr(c, f) for c in chunks]) for f in _FIELDS})
 
 
-_STATE_FIELDS = ("root_pos", "root_rot", "root_lin_vel", "root_ang_vel", "dof_pos", "dof_vel", "body_pos", "body_rot", "body_lin_vel", "body_ang_vel")
 
 
 def moved(state: HumanoidState, shift: Tensor) -> HumanoidState:

@@ -90,7 +90,7 @@ from mocap.rotations import (
     sixd_to_matrix,
 )
 from mocap.skeleton import Skeleton
-from mocap.state import HumanoidState, MotionFrames, Observations, SimState
+from mocap.state import HUMANOID_FIELDS, HumanoidState, MotionFrames, Observations, SimState
 from mocap_vmp.features import FeatureLayout, clip_starts, standardize
 
 STATE_FORMAT = "mocap_vmp.tracking_env/1"
@@ -634,18 +634,7 @@ _COUNTERS = (
     "hist_actions",
     "hist_targets",
 )
-_HUMANOID_FIELDS = (
-    "root_pos",
-    "root_rot",
-    "root_lin_vel",
-    "root_ang_vel",
-    "dof_pos",
-    "dof_vel",
-    "body_pos",
-    "body_rot",
-    "body_lin_vel",
-    "body_ang_vel",
-)
+_HUMANOID_FIELDS = HUMANOID_FIELDS
 
 
 # ----------------------------------------------------------------------------- the component
