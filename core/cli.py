@@ -107,6 +107,11 @@ def cmd_run(
         comparison([c for c, _ in cells], out_dir)
         failed = [name for name, s in status.items() if s != "done"]
         console.print(f"[bold green]done[/]: {len(cells) - len(failed)}/{len(cells)} cells; comparison: {out_dir / 'comparison.md'}", highlight=False)
+        console.print(
+            f"next: each cell's report is {out_dir}/<cell>/report.md; `mocap eval {out_dir}/<cell>` prints its per-clip table; "
+            "more specs to run are in specs/",
+            highlight=False,
+        )
         if failed:
             raise typer.Exit(EXIT_USER_ERROR)
         return
