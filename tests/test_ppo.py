@@ -22,7 +22,7 @@ from mocap.interfaces import Box, MultiDiscrete
 from mocap.rl.env import StepResult, VecEnv
 from mocap.rl.networks import ActorCritic, load_policy, save_policy
 from mocap.rl.normalizer import RunningNormalizer
-from mocap.rl.ppo import PPOParams, PPOTrainer, bounds_loss, clipped_surrogate, compute_gae, value_loss
+from mocap.rl.ppo import PPOParams, PPOTrainer, adapt_lr, bounds_loss, clipped_surrogate, compute_gae, value_loss
 from mocap.runlog import MetricsLogger
 
 torch.set_num_threads(1)
@@ -412,8 +412,11 @@ def test_ppo_learns_multi_discrete_point_env(tmp_path: Path):
     assert returns[-1] > returns[0] + 5 and returns[-1] > -5, (returns[0], returns[-1])
 
 
-def test_resume_is_bit_exact(tmp_path: Path):
-    params = small_params(total_env_steps=32 * 32 * 4, checkpoint_every=3, bounds_coef=1.0, soft_bound=0.5)
+@pytest.mark.parametrize("schedule", ["constant", "adaptive"])
+def test_resume_is_bit_exact(tmp_path: Path, schedule: str):
+    params = small_params(
+        total_env_steps=32 * 32 * 4, checkpoint_every=3, bounds_coef=1.0, soft_bound=0.5, lr_schedule=schedule, desired_kl=1e-4
+    )
     _train(tmp_path / "straight", params)
     straight = load_checkpoint(tmp_path / "straight" / "ppo.pt")
 
@@ -436,12 +439,32 @@ def test_resume_is_bit_exact(tmp_path: Path):
         for k, v in s.items():
             assert torch.equal(v, resumed["optimizer"]["state"][sid][k]), (sid, k)
     assert torch.equal(straight["obs"], resumed["obs"])
+    lrs = [g["lr"] for g in straight["optimizer"]["param_groups"]]
+    assert lrs == [g["lr"] for g in resumed["optimizer"]["param_groups"]]
+    assert (lrs[0] != params.lr) == (schedule == "adaptive")  # the adaptive lr moved and was restored on resume
     steps = [json.loads(line)["step"] for line in (split / "metrics.jsonl").read_text().splitlines()]
     assert steps == [1, 2, 3, 4]
     a = load_policy(tmp_path / "straight" / "policy.pt")
     b = load_policy(split / "policy.pt")
     assert all(torch.equal(x, y) for x, y in zip(a.parameters(), b.parameters()))
     assert torch.equal(a.obs_norm.var, b.obs_norm.var)
+
+
+@given(
+    lr=st.floats(1e-6, 1e-2),
+    kl=st.floats(0, 10) | st.just(float("nan")) | st.just(float("inf")),
+    desired=st.floats(1e-4, 0.1),
+)
+def test_adaptive_lr_rule(lr: float, kl: float, desired: float):
+    lo, hi = 1e-6, 1e-2
+    new = adapt_lr(lr, kl, desired, lo, hi)
+    assert lo <= new <= hi
+    if not math.isfinite(kl) or kl > 2 * desired:
+        assert new == max(lr / 1.5, lo)
+    elif kl < desired / 2:
+        assert new == min(lr * 1.5, hi)
+    else:
+        assert new == lr
 
 
 def test_params_validation_and_registry():

@@ -139,9 +139,16 @@ class PPOParams(BaseModel):
         2048, ge=1, description="samples per gradient step; ≤ batch; a remainder is dropped each epoch (PHC: 16384)"
     )
     lr: float = Field(3e-4, gt=0, description="Adam learning rate (PHC: 2e-5)")
-    lr_schedule: Literal["constant", "linear"] = Field(
-        "constant", description="'linear' anneals lr to 0 over the budget (PHC: constant)"
+    lr_schedule: Literal["constant", "linear", "adaptive"] = Field(
+        "constant",
+        description="'linear' anneals lr to 0 over the budget; 'adaptive' divides lr by 1.5 after a minibatch whose KL "
+        "to the rollout policy exceeds 2 x desired_kl and multiplies it by 1.5 when below desired_kl / 2, within "
+        "[lr_min, lr_max] (the rl_games / rsl_rl rule; the lr lives in the optimizer state, so it resumes exactly) "
+        "(PHC: constant)",
     )
+    desired_kl: float = Field(0.01, gt=0, description="KL target of the 'adaptive' schedule (rl_games / rsl_rl: 0.008-0.01)")
+    lr_min: float = Field(1e-6, gt=0, description="floor of the 'adaptive' schedule")
+    lr_max: float = Field(1e-2, gt=0, description="ceiling of the 'adaptive' schedule")
     gamma: float = Field(0.95, ge=0, le=1, description="discount γ (PHC: 0.99)")
     gae_lambda: float = Field(0.95, ge=0, le=1, description="GAE λ (PHC: 0.95)")
     clip: float = Field(0.2, gt=0, description="PPO ratio clip ε (PHC: 0.2)")
@@ -490,6 +497,9 @@ class PPOTrainer(Trainer):
                     # k3 estimator of KL(π_old || π): E[(r − 1) − log r] (Schulman, "Approximating KL divergence")
                     approx_kl = ((ratio - 1) - log_ratio).mean()
                     clip_frac = ((ratio - 1).abs() > p.clip).float().mean()
+                if p.lr_schedule == "adaptive":
+                    for group in optimizer.param_groups:
+                        group["lr"] = adapt_lr(group["lr"], float(approx_kl), p.desired_kl, p.lr_min, p.lr_max)
                 for key, val in (
                     ("loss/policy", pg_loss),
                     ("loss/value", v_loss),
@@ -507,6 +517,17 @@ class PPOTrainer(Trainer):
         return {k: v / steps for k, v in sums.items()}
 
 
+def adapt_lr(lr: float, kl: float, desired_kl: float, lr_min: float, lr_max: float) -> float:
+    """One step of the KL-adaptive learning rate (rl_games, rsl_rl): /1.5 when ``kl > 2·desired``,
+    ×1.5 when ``kl < desired/2``, unchanged in between; the result is clamped to ``[lr_min, lr_max]``.
+    A non-finite ``kl`` counts as too large."""
+    if not math.isfinite(kl) or kl > 2.0 * desired_kl:
+        lr = lr / 1.5
+    elif kl < 0.5 * desired_kl:
+        lr = lr * 1.5
+    return min(max(lr, lr_min), lr_max)
+
+
 def _summary(stats: dict[str, float], iteration: int, env_steps: int) -> dict[str, float]:
     out = {"iterations": float(iteration), "env_steps": float(env_steps)}
     for key, value in stats.items():
@@ -518,6 +539,7 @@ def _summary(stats: dict[str, float], iteration: int, env_steps: int) -> dict[st
 __all__ = [
     "PPOParams",
     "PPOTrainer",
+    "adapt_lr",
     "bounds_loss",
     "clipped_surrogate",
     "compute_gae",
