@@ -322,3 +322,47 @@ def test_pmcp_resume_is_exact_in_every_phase(straight, tmp_path):
             assert torch.equal(va, vb) if isinstance(va, torch.Tensor) else va == vb, key
     sa = json.loads((final.parent / "pmcp_state.json").read_text())
     assert sa["primitives"] == state["primitives"] and sa["final_evaluation"] == state["final_evaluation"]
+
+
+RECOVERY_SPEC = SPEC.replace(
+    "params: {action: residual, episode_steps: 20, eval_every: 0, energy_coef: 0.0}",
+    "params: {action: residual, episode_steps: 20, eval_every: 0, energy_coef: 0.0, recovery_goal: {form: paper}}",
+).replace(
+    "      max_primitives: 2\n",
+    "      max_primitives: 1\n      recovery: {clips: [walk], env_steps: 128,"
+    " fail_states: {fall_init_prob: 0.5, far_init_prob: 0.5, recovery_episode_prob: 0.5, pool_size: 4, settle_steps: 10},"
+    " composer_fail_states: {fall_init_prob: 0.5, pool_size: 4, settle_steps: 10}}\n",
+)
+
+
+def test_pmcp_recovery_primitive_joins_the_composer(tmp_path, amp):
+    from mocap.testing import invoke
+    from mocap_phc.imitator import PHCParams, make_phc
+
+    assert "recovery:" in RECOVERY_SPEC and "recovery_goal" in RECOVERY_SPEC
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(RECOVERY_SPEC)
+    result = invoke(["run", spec, "--out", tmp_path / "runs" / "r"])
+    assert result.exit_code == 0, result.output
+    final = Path(json.loads((tmp_path / "runs" / "r" / "stages.json").read_text())[0]["checkpoint"])
+    state = json.loads((final.parent / "pmcp_state.json").read_text())
+    prims = state["primitives"]
+    assert len(prims) == 2 and not prims[0].get("recovery") and prims[1]["recovery"] is True
+    assert prims[1]["clip_ids"] == [0] and prims[1]["end"] == "budget"  # walk only; trained for its whole budget
+    # P(F) started from the imitation primitive (init copy) and was trained with fallen/far starts
+    env_state = load_checkpoint(final.parent / "prim1" / "ppo.pt")["env"]["inner"]
+    assert "root_dist" in env_state
+    data = load_checkpoint(final)
+    assert len(data["primitives"]) == 2  # the composer mixes K + 1 = 2 primitives
+    imitator = make_phc(PHCParams(action="residual", recovery_goal={"form": "paper"}), skeleton=amp, checkpoint=final)
+    assert imitator.num_primitives == 2
+    assert "(recovery)" in (tmp_path / "runs" / "r" / "pmcp.md").read_text()
+
+
+def test_pmcp_recovery_needs_the_goal_switch(tmp_path):
+    from mocap.testing import invoke
+
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(RECOVERY_SPEC.replace(", recovery_goal: {form: paper}", ""))
+    result = invoke(["run", spec, "--out", tmp_path / "runs" / "r"])
+    assert result.exit_code != 0 and "recovery_goal" in (result.output + result.stderr)

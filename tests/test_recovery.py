@@ -118,3 +118,50 @@ def test_far_starts_and_exact_resume(amp, walk):  # noqa: F811
     for x in acts[8:]:
         ra, rb = a.step(x), b.step(x)
         assert torch.equal(ra.obs, rb.obs) and torch.equal(ra.reward, rb.reward) and torch.equal(ra.terminated, rb.terminated)
+
+
+# ------------------------------------------------------------- PHC Eq. 4 and bonus recovery episodes
+@SETTINGS
+@given(st.lists(st.floats(0.0, 10.0), min_size=1, max_size=8), st.lists(st.floats(0.0, 10.0), min_size=1, max_size=8))
+def test_point_goal_reward_is_the_decrease_of_the_distance(prev, now):
+    from mocap_phc.recovery import point_goal_reward
+
+    n = min(len(prev), len(now))
+    p, d = torch.tensor(prev[:n], dtype=torch.float64), torch.tensor(now[:n], dtype=torch.float64)
+    r = point_goal_reward(p, d)
+    assert torch.allclose(r, p - d)
+    assert bool(((r > 0) == (d < p)).all())  # positive exactly when the humanoid got closer
+    assert torch.allclose(point_goal_reward(d, p), -r)
+
+
+def test_point_reward_replaces_imitation_while_far(amp, walk):  # noqa: F811
+    from mocap_phc.recovery import FailStateParams
+
+    fs = FailStateParams(far_init_prob=1.0, far_init_range=(3.0, 4.0), recovery_steps=20)
+    env = _env(amp, walk, fs, recovery_goal=RecoveryGoalParams(reward="point"))
+    env.reset()
+    prev = env.root_dist.clone()
+    assert bool((prev > 2.9).all())
+    res = env.step(torch.zeros(4, amp.num_dofs))
+    expected = prev - env.root_dist
+    energy = res.reward.double() - expected
+    assert bool((energy <= 1e-9).all()) and bool((energy > -0.05).all()), energy  # reward = point term + a small energy penalty
+    near = _env(amp, walk, None, recovery_goal=RecoveryGoalParams(reward="point"))
+    near.reset()
+    r = near.step(torch.zeros(4, amp.num_dofs)).reward
+    assert bool((r > 0.1).all())  # close to the reference: the imitation reward (in (0, 1]), not a tiny distance change
+
+
+def test_bonus_recovery_episodes_replace_terminations(amp, walk):  # noqa: F811
+    from mocap_phc.recovery import FailStateParams
+
+    fs = FailStateParams(recovery_episode_prob=1.0, recovery_steps=6)
+    env = _env(amp, walk, fs)
+    env.reset()
+    flop = torch.full((4, amp.num_dofs), 2.5)  # wild residual targets: the humanoid leaves the reference quickly
+    windows = 0
+    for _ in range(60):
+        res = env.step(flop)
+        assert not bool(res.terminated.any())  # every termination became a bonus recovery episode
+        windows += int((env.recovery_left == 6).sum())
+    assert windows > 0

@@ -292,6 +292,7 @@ class ImitationEnv:
         self._obs: Tensor | None = None
         self.last_evaluation: dict[str, Any] | None = None
         self.recovery_left = torch.zeros(N, dtype=torch.long, device=dev)
+        self.root_dist = torch.zeros(N, dtype=torch.float64, device=dev)  # root to reference root, m (point-goal reward)
         self._fall_pool: HumanoidState | None = None
         fs = p.fail_states
         if fs is not None and fs.fall_init_prob > 0:
@@ -362,6 +363,10 @@ class ImitationEnv:
         if fs is not None and (fs.fall_init_prob > 0 or fs.far_init_prob > 0):
             start = self._fail_starts(ids, start, fs)
         self.sim.reset(ids, start)
+        ref0 = self.library.frames(clips, t0)
+        self.root_dist[ids] = torch.linalg.vector_norm(
+            ref0.root_pos.to(torch.float64) - self.sim.state.root_pos[ids].to(ref0.root_pos.device, torch.float64), dim=-1
+        )
         if self.amp_history is not None:
             self._amp_fill(ids, self.sim.state.index(ids), clips, t0)
 
@@ -427,6 +432,14 @@ class ImitationEnv:
         self.progress += 1
 
         r_im, terms = self.reward_fn(state, ref)
+        dist = torch.linalg.vector_norm(ref.root_pos.to(torch.float64) - state.root_pos.to(ref.root_pos.device, torch.float64), dim=-1)
+        rg = p.recovery_goal
+        if rg is not None and rg.reward == "point":  # PHC Eq. 4: point-goal reward while far
+            from mocap_phc.recovery import point_goal_reward
+
+            far = self.root_dist > rg.close_distance
+            r_im = torch.where(far.to(r_im.device), point_goal_reward(self.root_dist, dist).to(r_im), r_im)
+        self.root_dist = dist
         energy = energy_penalty(state.dof_force, state.dof_vel, p.energy_form, p.energy_coef, self.progress)
         amp_info: dict[str, Tensor] = {}
         if self.amp_trainer is not None:
@@ -448,6 +461,11 @@ class ImitationEnv:
         if p.fail_states is not None:  # a fallen or far start has a grace window to recover in
             grace = self.recovery_left > 0
             terminated = terminated & (~grace | parts["unstable"])
+            if p.fail_states.recovery_episode_prob > 0:  # [C] bonus recovery episodes instead of some resets
+                u = torch.rand(N, generator=self._gen, dtype=torch.float64).to(terminated.device)
+                bonus = terminated & ~parts["unstable"] & (u < p.fail_states.recovery_episode_prob)
+                terminated = terminated & ~bonus
+                self.recovery_left = torch.where(bonus, torch.full_like(self.recovery_left, p.fail_states.recovery_steps + 1), self.recovery_left)
             self.recovery_left = (self.recovery_left - 1).clamp_min(0)
         reward = torch.where(parts["unstable"] | ~torch.isfinite(reward), torch.zeros_like(reward), reward)
         t_next = self.start_time + (self.progress + 1).to(torch.float64) * self.dt
@@ -626,6 +644,7 @@ class ImitationEnv:
             "progress": self.progress.cpu().clone(),
             "ep_return": self.ep_return.cpu().clone(),
             "recovery_left": self.recovery_left.cpu().clone(),
+            "root_dist": self.root_dist.cpu().clone(),
             **self.failures.state_dict(),
         }
         if self.amp_trainer is not None:
@@ -653,6 +672,8 @@ class ImitationEnv:
         self.ep_return = state["ep_return"].to(dev).clone()
         if "recovery_left" in state:
             self.recovery_left = state["recovery_left"].to(dev).clone()
+        if "root_dist" in state:
+            self.root_dist = state["root_dist"].to(dev).clone()
         self.failures.load_state_dict(state)
         if self.amp_trainer is not None:
             assert self.amp_history is not None

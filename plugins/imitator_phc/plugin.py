@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
-from typing import Any
+from pathlib import Path
+from typing import Annotated, Any, Optional
+
+import typer
 
 from mocap.hooks import hookimpl
 from mocap_phc.imitator import PHCParams, make_phc
@@ -29,3 +32,62 @@ def register_trainers(register: Any) -> None:
         description="PHC's PMCP in one stage: progressive primitives (each on the clips the previous one fails, until "
         "plateau), then a composer over the frozen primitives; writes pmcp.pt (a phc checkpoint) and pmcp.md",
     )
+
+
+@hookimpl
+def register_commands(app: Any) -> None:
+    @app.command("recover")
+    def recover_command(
+        target: Annotated[
+            Path, typer.Argument(help="what `mocap eval` accepts: a policy.pt, a latent checkpoint, checkpoints/<name>, a run directory, a spec")
+        ],
+        trials: Annotated[int, typer.Option("--trials", help="fallen starts, simulated in parallel")] = 64,
+        seconds: Annotated[float, typer.Option("--seconds", help="time allowed to recover, s")] = 10.0,
+        clip: Annotated[Optional[str], typer.Option("--clip", help="reference clip (default: walk)")] = None,
+        far_prob: Annotated[float, typer.Option("--far-prob", help="share of trials also 2-5 m away from the reference")] = 0.5,
+        seed: Annotated[int, typer.Option("--seed")] = 0,
+        json_out: Annotated[Optional[Path], typer.Option("--json", help="write the result as JSON")] = None,
+        video: Annotated[Optional[Path], typer.Option("--video", help="write a video of trial 0 (reference as a ghost)")] = None,
+        imitator_only: Annotated[
+            bool, typer.Option("--imitator-only", help="for a latent space: evaluate the imitator it was distilled from")
+        ] = False,
+    ) -> None:
+        """Recovery rate: from fallen (and far) states, the share that gets up and back within 0.5 m of the reference."""
+        import json
+
+        from rich.console import Console
+        from rich.progress import Progress
+
+        from mocap.evaluation import build_evaluation_target, load_evaluation_target
+        from mocap.plugins import get_plugins
+        from mocap_phc.recovery_eval import RecoveryEvalParams, evaluate_recovery
+
+        console = Console(stderr=True)
+        plugins = get_plugins()
+        info = load_evaluation_target(target, plugins)
+        loaded = build_evaluation_target(info, plugins, use_latent=not imitator_only)
+        params = RecoveryEvalParams(trials=trials, seconds=seconds, clip=clip, far_prob=far_prob, seed=seed)
+        recorder = None
+        if video is not None:
+            probe = loaded.make_sim(1)
+            recorder = probe.make_recorder(ghost=True) if hasattr(probe, "make_recorder") else None
+            probe.close()
+        with Progress(console=console, transient=True) as bar:
+            task = bar.add_task("recovery rollouts", total=int(round(seconds * 30)))
+            res = evaluate_recovery(
+                loaded.policy, loaded.library, loaded.make_sim, loaded.skeleton, params, recorder=recorder,
+                progress=lambda: bar.advance(task),
+            )
+        res["evaluated"] = str(target)
+        if recorder is not None and video is not None:
+            recorder.save(video)
+            res["video"] = str(video)
+        print(
+            f"recovery rate {res['recovery_rate']:.1%} of {res['trials']} fallen starts within {res['seconds']:g} s "
+            f"(fallen near: {res['fallen_near_recovery_rate']:.1%}, fallen and far: {res['fallen_far_recovery_rate']:.1%}); "
+            f"root back within 0.5 m: {res['root_back_rate']:.1%}; time to recover {res['time_to_recover_s']:.2f} s; "
+            f"reference clip {res['clip']}"
+        )
+        if json_out is not None:
+            json_out.parent.mkdir(parents=True, exist_ok=True)
+            json_out.write_text(json.dumps(res, indent=2) + "\n", encoding="utf-8")

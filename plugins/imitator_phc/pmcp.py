@@ -45,8 +45,16 @@ weights, its observation normalizer), the composer, the composer form and the cl
 with that file returns a :class:`CompositeImitator`, so ``mocap eval pmcp.pt`` works unchanged. A
 per-clip report ``pmcp.md`` is published to the run directory.
 
-Not implemented (see the digest): the fail-state recovery primitive P(F) and its composer
-curriculum; PNN lateral connections; carrying an AMP discriminator from one primitive to the next
+**Recovery** (``recovery:``, PHC §4.4 / §4.6): after the imitation primitives, the fail-state
+primitive P(F) is trained (phase ``recovery``) on the locomotion and get-up clips, initialized from
+the last imitation primitive, with fallen and far starts, bonus recovery episodes and the
+point-goal reward while far (PHC Eq. 4, ``RecoveryGoalParams.reward = "point"``); it is frozen at
+the end of its budget and the composer mixes K + 1 primitives, trained with fail starts
+interleaved (``composer_fail_states``). It needs the imitator's ``recovery_goal`` (Eq. 3's goal
+switch), which then applies to every primitive. ``mocap recover`` measures the recovery rate.
+
+Not implemented (see the digest): the code's separate AMP-only get-up phase of P(F) (configure
+``recovery.fail_states`` for it instead); PNN lateral connections; carrying an AMP discriminator from one primitive to the next
 (with ``amp`` on, each phase starts a new discriminator).
 """
 
@@ -67,6 +75,7 @@ from mocap.rl.env import StepResult
 from mocap.rl.networks import ActorCritic, load_policy, save_policy
 from mocap.rl.ppo import PPOParams, PPOTrainer
 from mocap_phc.imitator import PHCImitator
+from mocap_phc.recovery import FailStateParams
 
 PMCP_FORMAT = "mocap_phc.pmcp/1"
 STATE_FILE = "pmcp_state.json"
@@ -78,6 +87,34 @@ ComposerForm = Literal["weighted_sum", "multiplicative"]
 
 
 # ------------------------------------------------------------------------------------ params
+def _recovery_fail_default() -> FailStateParams:
+    return FailStateParams(fall_init_prob=0.3, far_init_prob=0.3, recovery_episode_prob=0.5)
+
+
+class RecoveryPhaseParams(BaseModel):
+    """The fail-state recovery primitive P(F) (PHC §4.4 / digest phc §4.4, §4.6)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    clips: list[str] = Field(
+        default_factory=lambda: ["walk", "run", "getup"],
+        description="clips of P(F)'s training set: every clip whose name contains one of these strings ([P] Q^loco, a "
+        "hand-picked locomotion subset of AMASS; here the bundled walk/run clips plus the get-up clips [I])",
+    )
+    env_steps: int = Field(2_000_000, ge=1, description="env-step budget of P(F) (rounded up to whole PPO iterations)")
+    fail_states: FailStateParams = Field(
+        default_factory=_recovery_fail_default,
+        description="episode starts of P(F): fallen / far starts and bonus recovery episodes ([C] phase 2: fallInitProb 0.3, "
+        "recoveryEpisodeProb 0.5; [P] far starts 2-5 m). [C]'s phase 1 (AMP-only get-up with fallInitProb 1) is not a "
+        "separate phase here: run it as its own stage with these fields if wanted",
+    )
+    composer_fail_states: FailStateParams | None = Field(
+        default_factory=_recovery_fail_default,
+        description="episode starts while training the composer ([P] 'fail-state recovery training is interleaved during "
+        "composer training'); None: RSI only",
+    )
+
+
 def _composer_ppo_default() -> PPOParams:
     return PPOParams(log_std_init=-2.9, learn_std=False)
 
@@ -137,6 +174,12 @@ class PMCPParams(BaseModel):
         None,
         description="initial composer output (the action head's bias) for every primitive; None: 1/K, i.e. the mean of the "
         "primitives' means in both forms ([I]; [C] starts from a random ReLU MLP)",
+    )
+    recovery: RecoveryPhaseParams | None = Field(
+        None,
+        description="train the fail-state recovery primitive P(F) after the imitation primitives (initialized from the last "
+        "one, point-goal reward while far, fallen/far starts) and give the composer K+1 primitives ([P] 3 + P(F)); needs "
+        "the imitator's recovery_goal (the observation switch of PHC Eq. 3). None: no recovery primitive",
     )
     composer_ppo: PPOParams = Field(
         default_factory=_composer_ppo_default,
@@ -495,13 +538,20 @@ class PMCPTrainer(Trainer):
         if not self.clips:
             raise ValueError("pmcp: the motion set has no clips")
         self.clip_names = unique_clip_names([c.name for c in self.clips])
+        if self.params.recovery is not None and getattr(self.component.params, "recovery_goal", None) is None:
+            from mocap.cli import UserError
+
+            raise UserError(
+                "pmcp recovery needs the fail-state goal switch: set imitator.params.recovery_goal (e.g. {form: paper}); "
+                "every primitive and the composer observe through it"
+            )
 
     def _library(self, ids: Sequence[int]) -> Any:
         from mocap.motion.library import MotionLibrary
 
         return MotionLibrary([self.clips[i] for i in ids], self.skeleton)
 
-    def _imitation_env(self, ids: Sequence[int], num_envs: int, seed: int) -> Any:
+    def _imitation_env(self, ids: Sequence[int], num_envs: int, seed: int, params: Any = None) -> Any:
         from mocap_phc.env import ImitationEnv
 
         ctx, sk = self.ctx, self.skeleton
@@ -510,7 +560,23 @@ class PMCPTrainer(Trainer):
         def eval_sim(n: int) -> Any:
             return ctx.build("simulator", skeleton=sk, num_envs=n, seed=seed)
 
-        return ImitationEnv(self.component.params, sk, self._library(ids), sim, seed=seed, eval_simulator_factory=eval_sim)
+        return ImitationEnv(
+            params if params is not None else self.component.params, sk, self._library(ids), sim, seed=seed, eval_simulator_factory=eval_sim
+        )
+
+    def _recovery_params(self, fail_states: FailStateParams | None) -> Any:
+        """The imitator's params with fallen/far starts and the point-goal reward while far (PHC Eq. 4)."""
+        base = self.component.params
+        goal = base.recovery_goal.model_copy(update={"reward": "point"})
+        return base.model_copy(update={"fail_states": fail_states, "recovery_goal": goal})
+
+    def recovery_clip_ids(self) -> list[int]:
+        rec = self.params.recovery
+        assert rec is not None
+        ids = [i for i, n in enumerate(self.clip_names) if any(key in n for key in rec.clips)]
+        if not ids:
+            raise ValueError(f"pmcp recovery: no clip name contains any of {rec.clips} (clips: {', '.join(self.clip_names)})")
+        return ids
 
     def _evaluate(self, ids: Sequence[int], policy_fn: Callable[[Tensor], Tensor], seed: int) -> dict[str, Any]:
         """The env's protocol on clips ``ids``: per full-library name -> success/tracked steps."""
@@ -573,9 +639,31 @@ class PMCPTrainer(Trainer):
                 return self._stopped(state)
             # frozen: decide what comes next
             if not self._next_primitive(state):
-                state["phase"] = "composer"
-                state["composer"] = {"status": "training"}
+                if self.params.recovery is not None:
+                    state["phase"] = "recovery"
+                    ids = self.recovery_clip_ids()
+                    state["primitives"].append(
+                        {
+                            "index": len(state["primitives"]),
+                            "clip_ids": ids,
+                            "budget_env_steps": int(self.params.recovery.env_steps),
+                            "status": "training",
+                            "recovery": True,
+                        }
+                    )
+                else:
+                    state["phase"] = "composer"
+                    state["composer"] = {"status": "training"}
                 self._save_state(state)
+            if ctx.should_stop():
+                return self._stopped(state)
+        if state["phase"] == "recovery":
+            prim = state["primitives"][-1]
+            if prim["status"] == "training" and not self._train_primitive(state, prim):
+                return self._stopped(state)
+            state["phase"] = "composer"
+            state["composer"] = {"status": "training"}
+            self._save_state(state)
             if ctx.should_stop():
                 return self._stopped(state)
         if state["phase"] == "composer" and not self._train_composer(state):
@@ -594,9 +682,13 @@ class PMCPTrainer(Trainer):
         phase_dir = self.workdir / f"prim{k}"
         seed = self._phase_seed(k)
         holder: dict[str, PrimitiveEnv] = {}
+        recovery = bool(prim.get("recovery"))
+        env_params = self._recovery_params(p.recovery.fail_states) if recovery and p.recovery is not None else None
+        # P(F) trains for its whole budget: its job (getting up, coming back) is not what the plateau evaluation measures
+        patience, stop = (0, False) if recovery else (p.plateau_evals, p.stop_on_success)
 
         def make_env(n: int) -> PrimitiveEnv:
-            env = PrimitiveEnv(self._imitation_env(ids, n, seed), p.eval_every, p.plateau_evals, p.stop_on_success)
+            env = PrimitiveEnv(self._imitation_env(ids, n, seed, env_params), p.eval_every, patience, stop)
             holder["env"] = env
             return env
 
@@ -611,7 +703,8 @@ class PMCPTrainer(Trainer):
         log = _PhaseLog(ctx.log, f"prim{k}")
         sub = _PhaseContext(ctx, phase_dir, seed, make_env, log, lambda: "env" in holder and holder["env"].done)
         names = [self.clip_names[i] for i in ids]
-        ctx.console.print(f"pmcp: primitive {k} on {len(ids)} clip(s): {', '.join(names[:8])}{' ...' if len(names) > 8 else ''}")
+        what = "recovery primitive P(F)" if recovery else "primitive"
+        ctx.console.print(f"pmcp: {what} {k} on {len(ids)} clip(s): {', '.join(names[:8])}{' ...' if len(names) > 8 else ''}")
         try:
             result = _SeededPPO(ppo_params, init).run(sub)
         finally:
@@ -623,7 +716,9 @@ class PMCPTrainer(Trainer):
         if not (finished or converged):
             return False  # the user stopped; PPO saved ppo.pt
         model = load_policy(result.checkpoint)
-        save_policy(phase_dir / PRIMITIVE_NAME, model, extra={"trainer": "pmcp", "primitive": k, "clips": names}, spec_yaml=ctx.spec_yaml())
+        save_policy(
+            phase_dir / PRIMITIVE_NAME, model, extra={"trainer": "pmcp", "primitive": k, "clips": names, "recovery": recovery}, spec_yaml=ctx.spec_yaml()
+        )
 
         def policy_fn(obs: Tensor) -> Tensor:
             with torch.no_grad():
@@ -687,8 +782,10 @@ class PMCPTrainer(Trainer):
             with torch.no_grad():
                 model.action_head.bias.fill_(w0)
 
+        env_params = self._recovery_params(p.recovery.composer_fail_states) if p.recovery is not None else None
+
         def make_env(n: int) -> ComposerEnv:
-            return ComposerEnv(self._imitation_env(ids, n, seed), prims, p.composer_form, p.composer_eps)
+            return ComposerEnv(self._imitation_env(ids, n, seed, env_params), prims, p.composer_form, p.composer_eps)
 
         log = _PhaseLog(ctx.log, "composer")
         sub = _PhaseContext(ctx, phase_dir, seed, make_env, log, lambda: False)
@@ -782,7 +879,7 @@ def pmcp_report(state: dict[str, Any], params: PMCPParams) -> str:
         ev = pr.get("evaluation") or {}
         rate = ev.get("success_rate")
         lines.append(
-            f"| {pr['index']} | {len(pr['clip_ids'])} | {pr.get('end', '-')} | {pr.get('iterations', '-')} | "
+            f"| {pr['index']}{' (recovery)' if pr.get('recovery') else ''} | {len(pr['clip_ids'])} | {pr.get('end', '-')} | {pr.get('iterations', '-')} | "
             f"{pr.get('env_steps', '-')} | {'-' if rate is None else f'{rate:.3f}'} |"
         )
     final = state.get("final_evaluation") or {}

@@ -36,6 +36,12 @@ class RecoveryGoalParams(BaseModel):
     )
     close_distance: float = Field(0.5, gt=0, description="root distance up to which the full imitation goal is used, m ([P] 0.5; [C] 0.25)")
     far_distance: float = Field(5.0, gt=0, description="the reference root is pulled to at most this distance, m ([P] 5; [C] 3)")
+    reward: Literal["imitation", "point"] = Field(
+        "imitation",
+        description="task reward while far (root farther than close_distance before the step): 'point' = PHC Eq. 4's "
+        "point-goal term r = d_{t-1} - d_t (the decrease of the root-to-reference-root distance, m per control step; "
+        "[P] for the recovery primitive and the composer) or 'imitation' = the imitation reward as everywhere else",
+    )
 
 
 _FIELDS = HUMANOID_FIELDS
@@ -100,6 +106,13 @@ class FailStateParams(BaseModel):
     )
     far_init_prob: float = Field(0.0, ge=0.0, le=1.0, description="share of the other resets moved away from the reference ([P] far states)")
     far_init_range: tuple[float, float] = Field((2.0, 5.0), description="distance of a far start from the reference root, m ([P] 2-5)")
+    recovery_episode_prob: float = Field(
+        0.0,
+        ge=0.0,
+        le=1.0,
+        description="chance that a terminated episode becomes a 'bonus' recovery episode (it goes on, with a recovery "
+        "window, instead of being reset) ([C] recoveryEpisodeProb 0.5 in phase 2 and for the composer)",
+    )
     recovery_steps: int = Field(
         90, ge=0, description="control steps after a fallen or far start during which tracking failures do not terminate ([C] 90 = 3 s)"
     )
@@ -160,9 +173,14 @@ def generate_fall_states(sim: Any, skeleton: Any, count: int, params: FailStateP
 
 
 
+def point_goal_reward(prev_dist: Tensor, dist: Tensor) -> Tensor:
+    """PHC Eq. 4's point-goal term (Won et al.): the decrease of the root distance to the reference root."""
+    return prev_dist - dist
+
+
 def moved(state: HumanoidState, shift: Tensor) -> HumanoidState:
     """``state`` translated by ``shift`` (N, 3)."""
     return replace(state, root_pos=state.root_pos + shift, body_pos=state.body_pos + shift[:, None, :])
 
 
-__all__ = ["FailStateParams", "RecoveryGoalParams", "generate_fall_states", "moved", "recovery_reference"]
+__all__ = ["FailStateParams", "RecoveryGoalParams", "generate_fall_states", "moved", "point_goal_reward", "recovery_reference"]

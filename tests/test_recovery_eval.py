@@ -1,0 +1,101 @@
+"""The recovery-rate protocol (``mocap_phc.recovery_eval``, ``mocap recover``) and the fallen states it starts from."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+from hypothesis import given
+from hypothesis import strategies as st
+from test_distill import walk  # noqa: F401  (fixture)
+
+from mocap_phc.recovery import FailStateParams, generate_fall_states
+from mocap_phc.recovery_eval import RecoveryEvalParams, evaluate_recovery, pick_clip, recovery_summary
+
+
+def test_summary_counts_the_first_step_within_the_threshold():
+    inf = 9.0
+    err = torch.tensor(
+        [
+            [inf, inf, 0.1],  # step 0 (the fallen start) never counts
+            [inf, inf, inf],
+            [0.4, inf, inf],
+            [0.6, 0.7, inf],
+        ],
+        dtype=torch.float64,
+    )
+    root = torch.tensor([[3.0, 3.0, 0.0], [2.0, 0.3, 3.0], [0.2, 3.0, 3.0], [0.2, 3.0, 3.0]], dtype=torch.float64)
+    s = recovery_summary(err, root, dt=0.1, threshold=0.5)
+    assert s["recovered"] == [True, False, False]
+    assert s["recovery_rate"] == pytest.approx(1 / 3) and s["time_to_recover_s"] == pytest.approx(0.2)
+    assert s["root_back_rate"] == pytest.approx(2 / 3) and s["tracking_at_end"] == 0.0
+    assert math.isnan(recovery_summary(err[:, 1:2], root[:, 1:2], 0.1, 0.01)["time_to_recover_s"])
+
+
+@given(st.integers(1, 6), st.integers(2, 12), st.floats(0.05, 2.0), st.integers(0, 2**31 - 1))
+def test_summary_rates_are_monotone_in_the_threshold(n, t, thr, seed):
+    g = torch.Generator().manual_seed(seed)
+    err = torch.rand(t, n, generator=g, dtype=torch.float64) * 2
+    root = torch.rand(t, n, generator=g, dtype=torch.float64) * 2
+    lo, hi = recovery_summary(err, root, 0.1, thr), recovery_summary(err, root, 0.1, thr * 1.5)
+    assert 0 <= lo["recovery_rate"] <= hi["recovery_rate"] <= 1
+    assert lo["root_back_rate"] <= hi["root_back_rate"]
+
+
+def test_pick_clip():
+    assert pick_clip(["run", "walk"], [True, True], None) == 1
+    assert pick_clip(["getup", "run"], [False, True], None) == 1
+    assert pick_clip(["getup", "kick"], [False, False], None) == 0
+    assert pick_clip(["getup", "kick"], [False, False], "kick") == 1
+    with pytest.raises(ValueError, match="no clip 'spin'"):
+        pick_clip(["getup", "kick"], [False, False], "spin")
+
+
+class HoldPose:
+    """A stand-in policy: PD targets = the zero pose (it never gets up)."""
+
+    def __init__(self, dofs: int):
+        self.dofs = dofs
+
+    def observe(self, state, ref):
+        return state.dof_pos
+
+    def act(self, obs):
+        return torch.zeros(obs.shape[0], self.dofs)
+
+
+def test_fallen_states_are_valid(amp):
+    from mocap_sim_mujoco.simulator import MujocoSimulator
+
+    sim = MujocoSimulator(skeleton=amp, num_envs=3, seed=0)
+    try:
+        s = generate_fall_states(sim, amp, 5, FailStateParams(settle_steps=45), torch.Generator().manual_seed(1))
+    finally:
+        sim.close()
+    for name in ("root_pos", "root_rot", "dof_pos", "body_pos", "body_rot"):
+        assert bool(torch.isfinite(getattr(s, name)).all()), name
+    assert s.root_pos.shape == (5, 3)
+    assert bool((s.root_pos[:, 2] < 0.5).all())  # on the ground (standing root height ~0.9 m)
+    assert bool((s.body_pos[..., 2] > -0.05).all())  # no body origin sunk into the floor
+    assert torch.allclose(torch.linalg.vector_norm(s.root_rot.double(), dim=-1), torch.ones(5, dtype=torch.float64), atol=1e-5)
+    assert float(s.dof_vel.abs().max()) == 0.0 and float(s.root_lin_vel.abs().max()) == 0.0
+
+
+def test_evaluate_recovery_with_a_policy_that_never_gets_up(amp, walk):  # noqa: F811
+    from mocap.motion.library import MotionLibrary
+    from mocap_sim_mujoco.simulator import MujocoSimulator
+
+    lib = MotionLibrary(walk, amp)
+    params = RecoveryEvalParams(trials=4, seconds=0.3, far_prob=0.5, seed=3, fall=FailStateParams(settle_steps=20))
+
+    def make_sim(n):
+        return MujocoSimulator(skeleton=amp, num_envs=n, seed=0)
+
+    res = evaluate_recovery(HoldPose(amp.num_dofs), lib, make_sim, amp, params)
+    assert res["protocol"] == "mocap-recovery-v1" and res["trials"] == 4 and res["clip"] == "walk"
+    assert res["recovery_rate"] == 0.0 and res["root_back_rate"] <= 0.5  # lying still: never back on the reference
+    assert res["fallen_near_trials"] + res["fallen_far_trials"] == 4
+    assert res["start_root_height_m"] < 0.5
+    again = evaluate_recovery(HoldPose(amp.num_dofs), lib, make_sim, amp, params)
+    assert again == res  # seeded: the same fallen states and offsets
