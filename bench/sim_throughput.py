@@ -16,7 +16,13 @@ For each humanoid (``amp``, ``smpl``) and N in {1, 16, 64, 256}:
   ``ThreadPoolExecutor`` over chunks (``mj_step(m, d, substeps)`` per env on the simulator's model,
   GIL released inside), with ``mj_kinematics``/``mj_comPos``/``mj_comVel`` and the per-env copies
   of qpos, qvel, xpos, xquat, cvel and the contact sensors that a state extraction needs (but not
-  the batched tensor conversion the simulator also pays).
+  the batched tensor conversion the simulator also pays);
+* optionally (``--warp``) the ``mujoco_warp`` simulator (MuJoCo Warp, same model) on ``--warp-device``
+  (default: cuda if available, else Warp's CPU device): ``MujocoWarpSimulator.step`` in the same
+  loop with the same states and targets (**warp**, and **warp/sim** against ``mujoco``), the
+  device recorded in the JSON. Warp compiles its kernels on first use (minutes on a CPU, cached
+  in ~/.cache/warp); that warm-up is not timed. ``--warp-only`` skips the ``mujoco`` numbers
+  (for GPU sizes such as 4096 envs, where they would take long).
 
 Initial states: ``amp``: reference frames of the 15 DeepMimic clips at random times, PD targets =
 each env's reference pose at its frame, held. ``smpl`` (no motion data ships): the rest pose
@@ -29,7 +35,8 @@ best run of each is the least disturbed one. Numbers from runs made at different
 comparable; ratios within one run are. Results go to
 ``bench/results/sim_throughput.json``.
 
-Usage: ``python bench/sim_throughput.py [--quick] [--threadpool] [--humanoids amp smpl] [--sizes 1 16 64 256]``
+Usage: ``python bench/sim_throughput.py [--quick] [--threadpool] [--warp [--warp-device cpu] [--warp-only]]
+[--humanoids amp smpl] [--sizes 1 16 64 256]``
 """
 
 from __future__ import annotations
@@ -135,6 +142,27 @@ def bench_threadpool(model: mujoco.MjModel, s0: np.ndarray, ctrl: np.ndarray, su
     return n * steps / dt, n * steps / dc
 
 
+def bench_warp(sim, ref, targets: torch.Tensor, steps: int) -> tuple[float, float]:  # type: ignore[no-untyped-def]
+    """Env steps/s (wall, cpu) of ``MujocoWarpSimulator.step``; the warm-up step (kernel compilation,
+    CUDA graph capture) is not timed, and CUDA work is synchronized before the clock stops."""
+
+    def sync() -> None:
+        if sim.sim_device.type == "cuda":
+            torch.cuda.synchronize(sim.sim_device)
+
+    sim.reset(torch.arange(sim.num_envs), ref)
+    sim.step(targets)  # warm-up
+    sim.reset(torch.arange(sim.num_envs), ref)
+    sync()
+    t0, c0 = time.perf_counter(), time.process_time()
+    for _ in range(steps):
+        state = sim.step(targets)
+    sync()
+    dt, dc = time.perf_counter() - t0, time.process_time() - c0
+    assert state.body_pos.shape[0] == sim.num_envs
+    return sim.num_envs * steps / dt, sim.num_envs * steps / dc
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="fewer steps and repeats (a smoke run)")
@@ -144,8 +172,13 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=None, help="best of this many runs (default 7, --quick 1)")
     ap.add_argument("--env-steps", type=int, default=None, help="env steps per run (N x control steps; default 3000, --quick 1000)")
     ap.add_argument("--threadpool", action="store_true", help="also measure the ThreadPoolExecutor design")
+    ap.add_argument("--warp", action="store_true", help="also measure the mujoco_warp simulator (needs pip install 'mocap[warp]')")
+    ap.add_argument("--warp-device", default=None, help="Warp device for --warp (default: cuda if available, else cpu)")
+    ap.add_argument("--warp-only", action="store_true", help="with --warp: skip the mujoco measurements")
     ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args()
+    if args.warp_only and not args.warp:
+        ap.error("--warp-only needs --warp")
     torch.set_num_threads(1)
     repeats = args.repeats or (1 if args.quick else 7)
     env_steps = args.env_steps or (1000 if args.quick else 3000)
@@ -157,6 +190,16 @@ def main() -> None:
     header = f"{'humanoid':8s} {'N':>4s} {'sim steps/s':>12s} {'raw':>10s} {'bare':>10s} {'sim/bare':>9s} {'sim/raw':>8s} {'cpu ratio':>9s}"
     if args.threadpool:
         header += f" {'threadpool':>11s} {'tp cpu':>8s}"
+    warp_info = None
+    if args.warp:
+        from mocap_sim_mujoco_warp.simulator import (
+            MujocoWarpParams,
+            MujocoWarpSimulator,
+            import_warp,
+        )
+
+        wp, mjw = import_warp()
+        header += f" {'warp':>10s} {'warp/sim':>8s}"
     print(header, flush=True)
     for name in args.humanoids:
         skeleton = get_plugins().get("humanoid", name).build()
@@ -170,8 +213,16 @@ def main() -> None:
             s0 = sim.get_physics_state()
             ctrl = np.zeros((n, sim.model.nu))
             ctrl[:, sim.index.actuator_ids] = targets.double().numpy()
-            best = {k: np.zeros(2) for k in ("sim", "raw", "bare", "threadpool")}  # (wall, cpu) rates
+            best = {k: np.zeros(2) for k in ("sim", "raw", "bare", "threadpool", "warp")}  # (wall, cpu) rates
+            wsim = None
+            if args.warp:
+                wsim = MujocoWarpSimulator(MujocoWarpParams(device=args.warp_device), skeleton=skeleton, num_envs=n)
+                warp_info = {"device": str(wsim.wp_device), "device_name": wsim.wp_device.name, "mujoco_warp": mjw.__version__, "warp": wp.__version__}
             for _ in range(repeats):
+                if wsim is not None:
+                    best["warp"] = np.maximum(best["warp"], bench_warp(wsim, ref, targets, steps))
+                if args.warp_only:
+                    continue
                 best["sim"] = np.maximum(best["sim"], bench_sim(sim, ref, targets, steps))
                 best["raw"] = np.maximum(best["raw"], bench_raw(sim.model, s0, ctrl, sim.params.substeps, steps, threads))
                 best["bare"] = np.maximum(best["bare"], bench_raw(bare, s0, ctrl, sim.params.substeps, steps, threads))
@@ -179,8 +230,15 @@ def main() -> None:
                     tp = bench_threadpool(sim.model, s0, ctrl, sim.params.substeps, steps, threads)
                     best["threadpool"] = np.maximum(best["threadpool"], tp)
             sim.close()
+            if wsim is not None:
+                wsim.close()
             cpu = {k: float(v[1]) for k, v in best.items()}
             best = {k: float(v[0]) for k, v in best.items()}
+            if args.warp_only:
+                row = {"humanoid": name, "num_envs": n, "control_steps": steps, "warp_steps_per_s": round(best["warp"], 1)}
+                rows.append(row)
+                print(f"{name:8s} {n:4d} {'-':>12s} {'-':>10s} {'-':>10s} {'-':>9s} {'-':>8s} {'-':>9s} {best['warp']:10.0f}", flush=True)
+                continue
             row = {
                 "humanoid": name,
                 "num_envs": n,
@@ -195,6 +253,9 @@ def main() -> None:
             if args.threadpool:
                 row["threadpool_steps_per_s"] = round(best["threadpool"], 1)
                 row["cpu_ratio_threadpool_bare"] = round(cpu["threadpool"] / cpu["bare"], 3)
+            if args.warp:
+                row["warp_steps_per_s"] = round(best["warp"], 1)
+                row["ratio_warp_sim"] = round(best["warp"] / best["sim"], 3)
             rows.append(row)
             line = (
                 f"{name:8s} {n:4d} {row['sim_steps_per_s']:12.0f} {row['raw_steps_per_s']:10.0f} {row['bare_steps_per_s']:10.0f} "
@@ -202,6 +263,8 @@ def main() -> None:
             )
             if args.threadpool:
                 line += f" {row['threadpool_steps_per_s']:11.0f} {row['cpu_ratio_threadpool_bare']:8.2f}"
+            if args.warp:
+                line += f" {row['warp_steps_per_s']:10.0f} {row['ratio_warp_sim']:8.2f}"
             print(line, flush=True)
 
     out = {
@@ -217,6 +280,8 @@ def main() -> None:
         "machine": {"cpu_count": os.cpu_count(), "platform": platform.platform(), "load_avg_1m": os.getloadavg()[0]},
         "results": rows,
     }
+    if warp_info is not None:
+        out["warp"] = warp_info  # the mujoco_warp rows' device (warp_steps_per_s)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(out, indent=2) + "\n")
     print(f"wrote {args.out}")

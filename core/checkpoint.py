@@ -1,16 +1,56 @@
-"""Checkpoint files: written atomically, carrying the spec and the package versions that made them."""
+"""Checkpoint files: written atomically, carrying the spec and the package versions that made them.
+
+Errors a user can act on are raised as :class:`CheckpointError` (a missing, corrupt or truncated
+file, a format version this mocap does not read, a checkpoint trained for another humanoid or
+architecture than the spec asks for) and :class:`StorageError` (a write that failed: disk full,
+read-only folder); the CLI prints either as one ``error:`` line with exit code 2.
+"""
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import platform
+import re
 import tempfile
 from importlib import metadata
 from pathlib import Path
 from typing import Any
 
 import torch
+
+
+class CheckpointError(ValueError):
+    """A checkpoint that cannot be used as asked: the message names the file and what to do."""
+
+
+class StorageError(OSError):
+    """Writing a file failed (disk full, read-only or unwritable folder); the message names the file.
+
+    An :class:`OSError` (``errno`` is the cause's) whose ``str`` is the whole user-facing message.
+    """
+
+    def __init__(self, path: Path | str, cause: OSError, *, previous_kept: bool = False):
+        super().__init__(cause.errno, cause.strerror or str(cause), str(path))
+        self.path = Path(path)
+        if cause.errno in DISK_FULL:
+            what = "the disk is full (no space left on device)" if cause.errno == errno.ENOSPC else "the disk quota is exceeded"
+            hint = "free some space and run the same command again (a run resumes from its last checkpoint)"
+        elif cause.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+            what = f"the folder is not writable ({cause.strerror or cause})"
+            hint = "choose a writable location"
+        else:
+            what = cause.strerror or str(cause)
+            hint = "check the disk and run the same command again"
+        kept = f"; the previous {self.path.name} is unchanged" if previous_kept else ""
+        self.message = f"cannot write {self.path}: {what}{kept}; {hint}"
+
+    def __str__(self) -> str:
+        return self.message
+
+
+DISK_FULL = frozenset(e for e in (errno.ENOSPC, getattr(errno, "EDQUOT", None)) if e is not None)
 
 
 def package_versions() -> dict[str, str]:
@@ -38,22 +78,37 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
     killed mid-write (SIGKILL, power loss) leaves only such a temporary behind; the next successful
     write of the same path removes it (temporaries carry their writer's pid, so another live
     process writing the same path concurrently keeps its own).
+
+    A write that fails (disk full, read-only folder) raises :class:`StorageError` naming ``path``;
+    the temporary is removed and an existing ``path`` is left as it was.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
+    existed = path.is_file()
     try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
+    except OSError as exc:
+        raise StorageError(path, exc, previous_kept=existed) from exc
+    try:
+        _write_fd(fd, data, path)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         Path(tmp).unlink(missing_ok=True)
+        if isinstance(exc, OSError) and not isinstance(exc, StorageError):
+            raise StorageError(path, exc, previous_kept=existed) from exc
         raise
     for stale in path.parent.glob(f".{path.name}.*.tmp"):  # left by an earlier writer that was killed
         if not _writer_alive(stale.name[len(path.name) + 2 :].split(".", 1)[0]):
             stale.unlink(missing_ok=True)
+
+
+def _write_fd(fd: int, data: bytes, path: Path) -> None:
+    """Write all of ``data`` to the open temporary ``fd`` (that will become ``path``) and flush it to
+    the disk; closes ``fd``. (One function, so that tests can simulate a full disk here.)"""
+    with os.fdopen(fd, "wb") as fh:
+        fh.write(data)
+        fh.flush()
+        os.fsync(fh.fileno())
 
 
 def _writer_alive(pid_text: str) -> bool:
@@ -94,22 +149,106 @@ def save_checkpoint(path: Path, payload: dict[str, Any], *, spec_yaml: str | Non
     atomic_write_bytes(Path(path), buffer.getvalue())
 
 
-def load_checkpoint(path: Path, map_location: str | torch.device = "cpu") -> dict[str, Any]:
+def load_checkpoint(
+    path: Path, map_location: str | torch.device = "cpu", *, expect: str | tuple[str, ...] | None = None, what: str = "checkpoint"
+) -> dict[str, Any]:
+    """The dict saved by :func:`save_checkpoint`. Raises :class:`CheckpointError` for a missing,
+    corrupt or truncated file, and (with ``expect``: the accepted ``format`` ids) for another
+    format or another version of the same format (see :func:`check_format`)."""
     path = Path(path)
+    if path.is_dir():
+        raise CheckpointError(f"{path}: a directory, not a checkpoint file")
     if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such checkpoint")
+        raise CheckpointError(f"{path}: no such checkpoint")
     try:
-        return torch.load(path, map_location=map_location, weights_only=False)
-    except Exception as exc:  # noqa: BLE001
-        raise ValueError(f"{path}: unreadable checkpoint ({type(exc).__name__}: {exc})") from None
+        data = torch.load(path, map_location=map_location, weights_only=False)
+    except Exception as exc:  # noqa: BLE001 - torch raises EOFError, RuntimeError, UnpicklingError, ...
+        size = path.stat().st_size
+        reason = str(exc).split(". ")[0].strip() or type(exc).__name__
+        raise CheckpointError(
+            f"{path}: unreadable checkpoint, the file is corrupt or truncated ({size} bytes; {type(exc).__name__}: {reason}); "
+            "an interrupted copy or download? copy it again, or retrain"
+        ) from None
+    if not isinstance(data, dict):
+        raise CheckpointError(f"{path}: not a mocap checkpoint (it holds a {type(data).__name__}, not a dict)")
+    if expect is not None:
+        check_format(path, data, expect, what=what)
+    return data
+
+
+_FORMAT_RE = re.compile(r"^(?P<family>.+)/(?P<version>\d+)$")
+
+
+def split_format(fmt: Any) -> tuple[str, int] | None:
+    """``("mocap.rl.policy", 1)`` for ``"mocap.rl.policy/1"``; None for anything else."""
+    m = _FORMAT_RE.match(fmt) if isinstance(fmt, str) else None
+    return (m["family"], int(m["version"])) if m else None
+
+
+def written_by(data: dict[str, Any]) -> str:
+    """``"mocap 0.3.0"``: the package version recorded in a checkpoint (``"an unknown mocap"`` if none)."""
+    versions = data.get("versions") if isinstance(data, dict) else None
+    version = versions.get("mocap") if isinstance(versions, dict) else None
+    return f"mocap {version}" if version else "an unknown mocap version"
+
+
+def check_format(path: Path | str, data: dict[str, Any], expect: str | tuple[str, ...], *, what: str = "checkpoint") -> None:
+    """Raise :class:`CheckpointError` unless ``data["format"]`` is one of ``expect``.
+
+    A file of the same format family with another version (``mocap.rl.policy/2`` where this mocap
+    reads ``mocap.rl.policy/1``) gets a message naming both versions and the mocap that wrote it."""
+    accepted = (expect,) if isinstance(expect, str) else tuple(expect)
+    got = data.get("format")
+    if got in accepted:
+        return
+    mine = split_format(got)
+    for fmt in accepted:
+        want = split_format(fmt)
+        if mine is not None and want is not None and mine[0] == want[0]:
+            from mocap import __version__
+
+            newer = mine[1] > want[1]
+            advice = (
+                f"a newer mocap wrote it: upgrade mocap, or use {written_by(data)}"
+                if newer
+                else f"this mocap cannot convert it; use {written_by(data)} or retrain"
+            )
+            raise CheckpointError(
+                f"{path}: {what} format version {mine[1]} ({got!r}, written by {written_by(data)}), but mocap {__version__} "
+                f"reads version {want[1]} ({fmt!r}); {advice}"
+            )
+    listed = " or ".join(repr(f) for f in accepted)
+    raise CheckpointError(f"{path}: not a {what} file (format {got!r}, expected {listed})")
+
+
+def embedded_humanoid(data: dict[str, Any]) -> str | None:
+    """The humanoid named by the spec embedded in a checkpoint (None without one)."""
+    import yaml
+
+    text = data.get("spec") if isinstance(data, dict) else None
+    if not isinstance(text, str):
+        return None
+    try:
+        doc = yaml.safe_load(text)
+    except yaml.YAMLError:
+        return None
+    humanoid = doc.get("humanoid") if isinstance(doc, dict) else None
+    name = humanoid.get("name") if isinstance(humanoid, dict) else humanoid
+    return str(name) if name else None
 
 
 __all__ = [
+    "CheckpointError",
+    "StorageError",
     "atomic_write_bytes",
     "atomic_write_json",
     "atomic_write_text",
+    "check_format",
+    "embedded_humanoid",
     "hardware",
     "load_checkpoint",
     "package_versions",
     "save_checkpoint",
+    "split_format",
+    "written_by",
 ]

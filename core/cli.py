@@ -1,6 +1,7 @@
 """The ``mocap`` command line (typer). Plugins add commands through ``register_commands(app)``.
 
-Exit codes: 0 success, 1 a run failed, 2 bad user input (spec, plugin names, data files),
+Exit codes: 0 success, 1 a run failed, 2 bad user input (spec, plugin names, data files, checkpoints,
+an unwritable --out, a full disk, a missing package),
 130 interrupted (the run saved a checkpoint; the same command resumes it).
 """
 
@@ -8,6 +9,7 @@ from __future__ import annotations
 
 import json
 import sys
+import tempfile
 from pathlib import Path
 from typing import Annotated, Optional
 
@@ -30,12 +32,54 @@ class UserError(Exception):
 
 
 def user_errors() -> tuple[type[BaseException], ...]:
-    """Exception types that are the user's input, not a bug (printed without a traceback)."""
+    """Exception types that are the user's input, not a bug (printed without a traceback): also a
+    checkpoint that cannot be used (:class:`~mocap.checkpoint.CheckpointError`) and a write that
+    failed for lack of disk space or permission (:class:`~mocap.checkpoint.StorageError`)."""
+    from mocap.checkpoint import CheckpointError, StorageError
     from mocap.motion.clip import MotionDataError
     from mocap.pipeline import StageFailed
     from mocap.spec import SpecError
 
-    return (UserError, SpecError, PluginError, MotionDataError, StageFailed)
+    return (UserError, SpecError, PluginError, MotionDataError, StageFailed, CheckpointError, StorageError)
+
+
+#: third-party modules -> the pip package that provides them (for the "not installed" message)
+PIP_NAMES = {"pybullet_data": "pybullet", "cv2": "opencv-python", "yaml": "pyyaml", "PIL": "pillow", "sklearn": "scikit-learn"}
+
+
+def missing_package_message(exc: ImportError) -> str | None:
+    """One line for a third-party package that is missing or broken (an incomplete install), or
+    None when the failed import is mocap's own (a bug: keep the traceback)."""
+    name = getattr(exc, "name", None)
+    if not name:
+        return None
+    top = name.split(".")[0]
+    if top == "mocap" or top.startswith("mocap_"):
+        return None
+    package = PIP_NAMES.get(top, top)
+    extra = "; it provides the DeepMimic clips and the amp humanoid's URDF" if package == "pybullet" else ""
+    return (
+        f"the Python package {package!r} is missing or broken (importing {name!r} failed{extra}); "
+        f"install it into this environment: pip install {package}"
+    )
+
+
+def check_output_dir(path: Path, option: str = "--out") -> None:
+    """Raise :class:`UserError` unless ``path`` is (or can be created as) a writable directory —
+    before anything is trained, so a bad ``--out`` costs nothing."""
+    path = Path(path)
+    for existing in (path, *path.parents):
+        if existing.exists() or existing.is_symlink():
+            if not existing.is_dir():
+                where = "it is" if existing == path else f"{existing} is"
+                raise UserError(f"{option} {path}: {where} a file, not a directory; choose another {option}")
+            break
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=path):
+            pass
+    except OSError as exc:
+        raise UserError(f"{option} {path}: not writable ({exc.strerror or exc}); choose another {option}") from None
 
 
 def fail(message: str, code: int = EXIT_USER_ERROR) -> "typer.Exit":
@@ -96,8 +140,11 @@ def cmd_run(
     from mocap.pipeline import PipelineInterrupted, run_pipeline
 
     cells = load_cells(spec, _plugins(), set_ or [])
+    if store is not None:
+        check_output_dir(store, "--store")
     if len(cells) > 1 or cells[0][0].name:
         out_dir = out or Path("runs") / cells[0][1].spec.name
+        check_output_dir(out_dir)
         console.print(f"comparison: {len(cells)} cells -> {out_dir}/<cell>/", highlight=False)
         try:
             status = run_cells(cells, _plugins(), out_dir, console, jobs=jobs, store=store)
@@ -117,6 +164,11 @@ def cmd_run(
         return
     resolved = cells[0][1]
     out_dir = out or Path("runs") / resolved.spec.name
+    check_output_dir(out_dir)
+    if store is None:
+        from mocap.pipeline import artifact_store
+
+        check_output_dir(artifact_store(out_dir), "--store (default: next to --out)")
     try:
         records = run_pipeline(resolved, _plugins(), out_dir, store=store, console=console)
     except PipelineInterrupted as exc:
@@ -231,6 +283,12 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         err_console.print("[yellow]interrupted[/]")
         return EXIT_INTERRUPTED
+    except ImportError as exc:  # a third-party package missing or half-installed: the environment, not a bug
+        message = missing_package_message(exc)
+        if message is None:
+            raise
+        err_console.print(f"[red]error:[/] {message}", highlight=False)
+        return EXIT_USER_ERROR
     except Exception as exc:  # usage errors of typer's (vendored) click arrive here in non-standalone mode
         if callable(getattr(exc, "show", None)) and isinstance(getattr(exc, "exit_code", None), int):
             exc.show()

@@ -40,12 +40,25 @@ Hybrid-RVQ, a third-party one); the trainer knows nothing of their internals. PU
 
 Optional student methods, used when present: ``init_from_teacher(teacher)`` before training
 starts (e.g. to copy the teacher's input statistics), ``update_normalizers(obs)`` with each chunk
-before the update, ``config`` (a dict saved with the weights).
+before the update, ``config`` (a dict saved with the weights), and ``rl_hook()`` for an RL term
+(``None`` = off; PULSE's Table 3 ablation, :mod:`mocap_pulse.rl_term`): with a hook, the student
+acts through ``hook.act(obs) -> (output, per-env tensors)``, ``hook.reward(state, ref)`` is recorded
+after every step, and ``hook.finish(stacked tensors, rewards, terminated, truncated, next obs)``
+returns (T, N, ...) tensors that ride in the chunk's ``obs.extra`` to ``distill_losses``.
 
 Files in the stage directory: ``distill.pt`` (resumable: student, optimizer, RNG states, counters,
 env state incl. MuJoCo physics, clip weights and failure counts, params, spec) and, at the end,
 ``latent.pt`` (:func:`save_latent`; a latent factory loads it with :func:`load_latent_state`). A
 run resumed from ``distill.pt`` produces the same weights as an uninterrupted one (CPU).
+
+Data-parallel (under torchrun, :mod:`mocap.distributed`): every rank rolls out its own
+``num_envs`` envs (own seed, own episode bookkeeping and hard-negative counts from its own
+episodes), so an iteration collects ``world_size × num_envs × horizon`` samples and
+``total_env_steps`` counts all of them. The student starts from rank 0's weights, gradients are
+averaged over ranks before the clip and the step, and the student's running normalizers are
+merged exactly. Rank 0 alone runs the periodic evaluation and sends its result (and the clips it
+failed, for the failure counts) to the others; rank 0 writes ``distill.pt`` with each rank's
+rollout state (``rank_states``) and ``latent.pt``.
 """
 
 from __future__ import annotations
@@ -62,6 +75,7 @@ import torch
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 from torch import Tensor
 
+from mocap import distributed as dist
 from mocap.checkpoint import load_checkpoint, save_checkpoint
 from mocap.faults import FaultGuard
 from mocap.hooks import hookimpl
@@ -359,6 +373,8 @@ def _columns(obs: Observations, idx: Tensor) -> Observations:
 class DistillTrainer(Trainer):
     """Distills the imitator stage into the latent stage (module docstring); resumes from ``distill.pt``."""
 
+    data_parallel = True  # runs on every rank under torchrun (module docstring)
+
     def __init__(self, params: DistillParams | None = None):
         self.params = params or DistillParams()
 
@@ -407,6 +423,8 @@ class DistillTrainer(Trainer):
             return _Borrowed(eval_sims[n])  # type: ignore[return-value]
 
         params_list = [q for q in student.parameters() if q.requires_grad]
+        parallel, world = dist.active(), dist.world_size()
+        dist.broadcast_module(student)  # data-parallel: every rank starts from rank 0's weights
         optimizer = torch.optim.Adam(params_list, lr=p.lr)
         gen = torch.Generator().manual_seed(int(ctx.seed) + 1)  # minibatch order, mixture draws
         window: dict[str, deque[float]] = {}
@@ -419,15 +437,23 @@ class DistillTrainer(Trainer):
                 raise ValueError(f"{ckpt_path}: not a distill checkpoint (format {ck.get('format')!r})")
             student.load_state_dict(ck["student"])
             optimizer.load_state_dict(ck["optimizer"])
-            episodes.load_state_dict(ck["episodes"])
-            gen.set_state(ck["generator"])
+            mine = _own_state(ck, dist.rank())
+            if mine is not None:
+                episodes.load_state_dict(mine["episodes"])
+                gen.set_state(mine["generator"])
+            else:  # a rank the checkpoint did not have: fresh episodes of its own seed
+                episodes.reset_all()
             iteration, env_steps = int(ck["iteration"]), int(ck["env_steps"])
-            window = {k: deque(v, maxlen=EPISODE_WINDOW) for k, v in ck["episode_window"].items()}
+            if mine is not None:
+                window = {k: deque(v, maxlen=EPISODE_WINDOW) for k, v in mine["episode_window"].items()}
             last_eval = dict(ck.get("last_eval", {}))
             guard.load_state_dict(ck.get("faults", {}))
-            _set_rng_state(ck["rng"])
+            if mine is not None:
+                _set_rng_state(mine["rng"])
             ctx.log.truncate_after(iteration)
             ctx.console.print(f"distill: resuming at iteration {iteration} ({env_steps:,} env steps)")
+            if int(ck.get("world_size", 1)) != world:
+                ctx.console.print(f"distill: the checkpoint was written by {int(ck.get('world_size', 1))} process(es), resuming with {world}")
         else:
             ctx.log.truncate_after(0)
             init = getattr(student, "init_from_teacher", None)
@@ -440,6 +466,19 @@ class DistillTrainer(Trainer):
         self._check_dims(teacher, student, episodes, device)
 
         def save(final: bool = False) -> None:
+            extra: dict[str, Any] = {}
+            if parallel:  # every rank's own rollout state goes into rank 0's checkpoint
+                states = dist.gather_object(
+                    {
+                        "episodes": episodes.state_dict(),
+                        "generator": gen.get_state(),
+                        "rng": _rng_state(),
+                        "episode_window": {k: list(v) for k, v in window.items()},
+                    }
+                )
+                if states is None:  # not rank 0: nothing to write
+                    return
+                extra = {"world_size": world, "rank_states": {r: st for r, st in enumerate(states) if r > 0}}
             save_checkpoint(
                 ckpt_path,
                 {
@@ -457,12 +496,14 @@ class DistillTrainer(Trainer):
                     "faults": guard.state_dict(),
                     "params": p.model_dump(mode="json"),
                     "finished": final,
+                    **extra,
                 },
                 spec_yaml=spec_yaml,
             )
 
-        total = p.iterations
-        budget = total * p.batch_size
+        # the budget counts every rank's samples; alone this is p.iterations
+        total = iteration + max(0, math.ceil((p.total_env_steps - env_steps) / (p.batch_size * world)))
+        budget = p.iterations * p.batch_size
         progress_bar = IterationProgress(
             ctx.console,
             total,
@@ -478,12 +519,13 @@ class DistillTrainer(Trainer):
                 progress = min(1.0, env_steps / budget)
                 t0 = time.perf_counter()
                 chunk, teacher_out, starts, roll = self._rollout(teacher, student, episodes, sim, gen, progress, device, window)
-                env_steps += p.batch_size
+                env_steps += p.batch_size * world
                 t_rollout = time.perf_counter() - t0
 
                 t1 = time.perf_counter()
                 stats: dict[str, float] = {}
-                if guard.check_inputs(observations=chunk.proprio, goals=chunk.goal, labels=teacher_out):
+                # (data-parallel: a non-finite input on any rank makes every rank skip the chunk)
+                if dist.check_inputs(guard, observations=chunk.proprio, goals=chunk.goal, labels=teacher_out):
                     stats = self._update(student, optimizer, params_list, chunk, teacher_out, starts, gen, progress, guard)
                 t_update = time.perf_counter() - t1
                 iteration += 1
@@ -506,16 +548,27 @@ class DistillTrainer(Trainer):
                         log[f"episode/{key}"] = float(np.mean(vals))
                 w = episodes.clip_weights
                 log["hard_negative/max_weight"], log["hard_negative/min_weight"] = float(w.max()), float(w.min())
+                if parallel:  # one line for all ranks: sums, slowest times, means, pooled episode windows
+                    log = dist.reduce_metrics(log, maxima=("time/rollout_s", "time/update_s"), windows=window)
+                    log["steps_per_s"] = p.batch_size * world / max(log["time/rollout_s"] + log["time/update_s"], 1e-9)
                 if p.eval_every > 0 and (iteration % p.eval_every == 0 or iteration >= total):
                     t2 = time.perf_counter()
-                    last_eval = self._evaluate(teacher, student, lib, episodes, make_eval_sim, device)
+                    if parallel:  # rank 0 evaluates; every rank adds the clips it failed to its counts
+                        evaluated = None
+                        if dist.is_main():
+                            with dist.solo():
+                                evaluated = self._evaluate_clips(teacher, student, lib, episodes, make_eval_sim, device)
+                        last_eval, failed = dist.broadcast_object(evaluated)
+                        episodes.add_failures(failed)
+                    else:
+                        last_eval = self._evaluate(teacher, student, lib, episodes, make_eval_sim, device)
                     log.update(last_eval)
                     log["time/eval_s"] = time.perf_counter() - t2
                 ctx.log.log(iteration, **log)
                 last_stats = log
                 progress_bar.update(iteration, env_steps, log)
 
-                stop = ctx.should_stop()
+                stop = dist.any_true(ctx.should_stop()) if parallel else ctx.should_stop()
                 if stop or iteration % p.checkpoint_every == 0 or iteration >= total:
                     save(final=iteration >= total)
                 if stop:
@@ -529,7 +582,10 @@ class DistillTrainer(Trainer):
 
         metrics = _summary(last_stats, last_eval, iteration, env_steps)
         latent_path = workdir / LATENT_NAME
-        save_latent(latent_path, student, extra={"trainer": "distill", "metrics": metrics, "label": p.label}, spec_yaml=spec_yaml)
+        if parallel:
+            dist.assert_in_sync(student, "distill")
+        if dist.is_main():
+            save_latent(latent_path, student, extra={"trainer": "distill", "metrics": metrics, "label": p.label}, spec_yaml=spec_yaml)
         return StageResult(checkpoint=latent_path, metrics=metrics)
 
     # ------------------------------------------------------------------------------ pieces
@@ -571,6 +627,13 @@ class DistillTrainer(Trainer):
         starts = torch.zeros(T, N, dtype=torch.bool)
         err_sum, gap_sum, teacher_acts = 0.0, 0.0, 0.0
         student.eval()
+        # optional RL term (e.g. PULSE's Table 3 ablation): the student's hook acts, is rewarded, and
+        # adds per-sample tensors (advantages, ...) to the chunk's ``extra`` for its distill_losses
+        rl_hook = student.rl_hook() if callable(getattr(student, "rl_hook", None)) else None
+        if rl_hook is not None and p.act_with != "student":
+            raise DistillError("the latent's RL term is on-policy: it needs act_with: student")
+        rl_info: list[dict[str, Tensor]] = []
+        rl_reward, rl_terminated, rl_trunc = torch.zeros(T, N), torch.zeros(T, N, dtype=torch.bool), torch.zeros(T, N, dtype=torch.bool)
         state = sim.state
         with torch.no_grad():
             for t in range(T):
@@ -585,7 +648,12 @@ class DistillTrainer(Trainer):
                 if p.act_with == "teacher":
                     acting = t_out
                 else:
-                    s_out = student.student_action(observations_to(obs, device), sample=p.sample_latent).to(t_out)
+                    if rl_hook is not None:
+                        s_out, info = rl_hook.act(observations_to(obs, device))
+                        s_out = s_out.to(t_out)
+                        rl_info.append(info)
+                    else:
+                        s_out = student.student_action(observations_to(obs, device), sample=p.sample_latent).to(t_out)
                     gap_sum += float((s_out - t_out).square().sum(-1).mean())
                     if beta is not None:
                         use_teacher = torch.rand(N, generator=gen) < beta
@@ -596,6 +664,9 @@ class DistillTrainer(Trainer):
                 state = sim.step(teacher.to_pd_targets(obs, acting))
                 res = episodes.after_step(state, ref)
                 err_sum += float(res["error"].mean())
+                if rl_hook is not None:
+                    rl_reward[t] = rl_hook.reward(state, ref).cpu()
+                    rl_terminated[t], rl_trunc[t] = res["terminated"].cpu(), res["truncated"].cpu()
                 done = res["terminated"] | res["truncated"]
                 if bool(done.any()):
                     ids = done.nonzero().squeeze(-1)
@@ -612,6 +683,12 @@ class DistillTrainer(Trainer):
             roll["rollout/mixture_beta"] = beta
             roll["rollout/teacher_fraction"] = teacher_acts / T
         chunk = observations_to(_stack_obs(obs_list), device)
+        if rl_hook is not None:
+            with torch.no_grad():
+                last_obs = observations_to(teacher.observe(sim.state, episodes.reference_next()), device)
+                stacked = {k: torch.stack([i[k] for i in rl_info]) for k in rl_info[0]}
+                chunk.extra.update(rl_hook.finish(stacked, rl_reward.to(device), rl_terminated, rl_trunc, last_obs))
+            roll["rollout/rl_reward"] = float(rl_reward.mean())
         return chunk, outs.to(device), starts.to(device), roll
 
     def _update(
@@ -630,8 +707,8 @@ class DistillTrainer(Trainer):
         guard = guard or FaultGuard(0, "distill")
         N = teacher_out.shape[1]
         update_norm = getattr(student, "update_normalizers", None)
-        if callable(update_norm):
-            update_norm(chunk)
+        if callable(update_norm):  # data-parallel: the statistics of all ranks' chunks, merged exactly
+            dist.sync_normalizers(student, lambda: update_norm(chunk))
         student.train()
         sums: dict[str, float] = {}
         steps = 0
@@ -643,7 +720,10 @@ class DistillTrainer(Trainer):
                 loss = losses["loss"]
                 optimizer.zero_grad(set_to_none=True)
                 loss.backward()
-                stepped, grad_norm = guard.step(optimizer, loss, params, p.max_grad_norm)
+                step_loss = loss
+                if dist.active():  # average gradients (and the loss: non-finite anywhere -> skipped everywhere)
+                    (step_loss,) = dist.average_gradients(params, loss)
+                stepped, grad_norm = guard.step(optimizer, step_loss, params, p.max_grad_norm)
                 if not stepped:
                     continue
                 for key, val in losses.items():
@@ -664,6 +744,20 @@ class DistillTrainer(Trainer):
         device: torch.device,
     ) -> dict[str, float]:
         """The student as an imitator on every clip (z = encoder mean); failed clips add 1 to their counts."""
+        out, failed = self._evaluate_clips(teacher, student, lib, episodes, make_sim, device)
+        episodes.add_failures(failed)
+        return out
+
+    def _evaluate_clips(
+        self,
+        teacher: Imitator,
+        student: Any,
+        lib: MotionLibrary,
+        episodes: DistillEpisodes,
+        make_sim: Callable[[int], Simulator],
+        device: torch.device,
+    ) -> tuple[dict[str, float], Tensor]:
+        """:meth:`_evaluate` without touching the failure counts: ``(eval metrics, failed per clip)``."""
         from mocap.evaluation import ImitationEvalParams, evaluate_imitator
 
         p = self.params
@@ -672,9 +766,16 @@ class DistillTrainer(Trainer):
         params = ImitationEvalParams(num_envs=p.eval_num_envs, horizon=horizon, threshold=p.termination_threshold, video=False)
         table = evaluate_imitator(LatentImitator(teacher, student, device), lib, make_sim, params)
         failed = torch.tensor([not table["clips"][name]["success"] for name in lib.clip_names], dtype=torch.float64)
-        episodes.add_failures(failed)
         out = {f"eval/{k}": float(v) for k, v in table["aggregate"].items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
-        return out
+        return out, failed
+
+
+def _own_state(ck: dict[str, Any], rank: int) -> dict[str, Any] | None:
+    """This rank's rollout state in a checkpoint (rank 0: the top-level fields, which a
+    single-process run also writes); None when the checkpoint lacks it."""
+    if rank == 0:
+        return {k: ck[k] for k in ("episodes", "generator", "rng", "episode_window")}
+    return (ck.get("rank_states") or {}).get(rank)
 
 
 class _Borrowed:

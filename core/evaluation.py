@@ -375,6 +375,14 @@ def _make_pd_replay(params: NoParams, **_: Any) -> Imitator:
 @hookimpl
 def register_trainers(register):  # type: ignore[no-untyped-def]
     register("imitation_eval", ImitationEval, params=ImitationEvalParams, description="evaluate an imitator on every clip")
+    from mocap.suite import EvalSuite, EvalSuiteParams
+
+    register(
+        "eval_suite",
+        EvalSuite,
+        params=EvalSuiteParams,
+        description="imitation + random generation + the task stage's metrics of one cell, in one eval stage (comparisons)",
+    )
 
 
 @hookimpl
@@ -440,10 +448,8 @@ def _from_file(target: Path, plugins: Any) -> EvalTarget:
         except SpecError as exc:
             raise UserError(str(exc)) from None
         return _check(EvalTarget(resolved, _stage_checkpoint(resolved.spec, "imitator"), _stage_checkpoint(resolved.spec, "latent")), target)
-    try:
-        data = load_checkpoint(target)
-    except ValueError as exc:
-        raise UserError(str(exc)) from None
+    data = load_checkpoint(target)  # CheckpointError (missing, corrupt, truncated): one clear line
+    _check_known_format(target, data)
     spec_yaml = data.get("spec") if isinstance(data, dict) else None
     if not spec_yaml:
         raise UserError(f"{target}: the checkpoint carries no spec; evaluate its run directory instead")
@@ -454,6 +460,21 @@ def _from_file(target: Path, plugins: Any) -> EvalTarget:
         teacher = _stage_checkpoint(resolved.spec, "imitator")
         return _check(EvalTarget(resolved, teacher, target), target)
     return _check(EvalTarget(resolved, target), target)
+
+
+def _check_known_format(path: Path, data: dict[str, Any]) -> None:
+    """A policy / latent / trainer checkpoint of a format version this mocap does not read: a
+    :class:`~mocap.checkpoint.CheckpointError` naming both versions (other formats pass: their
+    plugin checks them)."""
+    from mocap.checkpoint import check_format, split_format
+    from mocap.distill import CHECKPOINT_FORMAT as DISTILL_FORMAT, LATENT_FORMAT
+    from mocap.rl.networks import POLICY_FORMAT
+    from mocap.rl.ppo import CHECKPOINT_FORMAT as PPO_FORMAT
+
+    known = (POLICY_FORMAT, PPO_FORMAT, LATENT_FORMAT, DISTILL_FORMAT)
+    got = split_format(data.get("format"))
+    if got is not None and data.get("format") not in known and any(split_format(k)[0] == got[0] for k in known):  # type: ignore[index]
+        check_format(path, data, known)
 
 
 def _check(t: EvalTarget, source: Path) -> EvalTarget:
@@ -470,6 +491,40 @@ def _check(t: EvalTarget, source: Path) -> EvalTarget:
         if path is not None and not Path(path).is_file():
             raise UserError(f"{source}: checkpoint {path} does not exist (moved? evaluate a directory holding it)")
     return t
+
+
+def _action_count(data: dict[str, Any]) -> int | None:
+    """The number of actions of the policy in a checkpoint (policy file or PPO checkpoint), if it has one."""
+    from mocap.rl.networks import POLICY_FORMAT
+
+    config = data.get("config") if data.get("format") == POLICY_FORMAT else data.get("policy_config")
+    space = config.get("action_space") if isinstance(config, dict) else None
+    if isinstance(space, dict) and space.get("type") == "box" and space.get("shape"):
+        return int(space["shape"][0])
+    return None
+
+
+def check_trained_humanoid(path: Path, skeleton: Any, plugins: Any, stage: str = "imitator") -> None:
+    """Raise :class:`~mocap.checkpoint.CheckpointError` when the spec embedded in checkpoint ``path``
+    names another humanoid than ``skeleton``: "trained for humanoid amp with 28 actions; the spec
+    asks for smpl with 69"."""
+    from mocap.checkpoint import CheckpointError, embedded_humanoid, load_checkpoint
+
+    data = load_checkpoint(path)
+    trained = embedded_humanoid(data)
+    if trained is None or trained == skeleton.name:
+        return
+    actions = _action_count(data)
+    if actions is None:
+        try:
+            actions = plugins.get("humanoid", trained).build(None).num_dofs
+        except Exception:  # noqa: BLE001 - a humanoid this install lacks: say so without the count
+            actions = None
+    count = f" with {actions} actions" if actions is not None else ""
+    raise CheckpointError(
+        f"{path}: this {stage} checkpoint was trained for humanoid {trained}{count}; the spec asks for "
+        f"{skeleton.name} with {skeleton.num_dofs}. Use a checkpoint trained on {skeleton.name}, or set humanoid: {trained}"
+    )
 
 
 def load_evaluation_target(target: Path, plugins: Any) -> EvalTarget:
@@ -537,6 +592,9 @@ def build_evaluation_target(
 
     resolved, spec = target.resolved, target.spec
     skeleton = plugins.get("humanoid", spec.humanoid.name).build(resolved.params.get("humanoid"))
+    for stage, path in (("imitator", target.imitator_checkpoint), ("latent", target.latent_checkpoint)):
+        if path is not None:  # before loading motions: a checkpoint for another humanoid fails at once
+            check_trained_humanoid(Path(path), skeleton, plugins, stage)
     if motions is None:
         source = plugins.get("motion_source", spec.motions.name).build(resolved.params.get("motions"))
     else:

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -25,7 +24,8 @@ EXPORTED_NAMES = {"imitator": "policy.pt", "latent": "latent.pt"}
 
 def export_run(run_dir: Path, dest: Path) -> Path:
     """Write ``dest/spec.yaml`` and copy the trained stages' files (module docstring); returns the spec path."""
-    from mocap.cli import UserError
+    from mocap.checkpoint import atomic_write_bytes, atomic_write_text
+    from mocap.cli import UserError, check_output_dir
 
     run_dir, dest = Path(run_dir), Path(dest)
     spec_file, stages_file = run_dir / "spec.yaml", run_dir / "stages.json"
@@ -33,7 +33,7 @@ def export_run(run_dir: Path, dest: Path) -> Path:
         raise UserError(f"{run_dir}: not a finished run directory (spec.yaml + stages.json)")
     doc: dict[str, Any] = yaml.safe_load(spec_file.read_text())
     stages = {s["stage"]: s for s in json.loads(stages_file.read_text())}
-    dest.mkdir(parents=True, exist_ok=True)
+    check_output_dir(dest, "DEST")  # a file, or not writable: one clear error before anything is copied
     exported = []
     for stage, name in EXPORTED_NAMES.items():
         section = doc.get(stage)
@@ -47,7 +47,7 @@ def export_run(run_dir: Path, dest: Path) -> Path:
             target = src
         else:
             target = dest / name
-            shutil.copyfile(src, target)
+            atomic_write_bytes(target, src.read_bytes())  # a full disk leaves no half-copied file
         section["checkpoint"] = os.path.relpath(target.resolve(), dest.resolve())
         section.pop("trainer", None)
         exported.append(stage)
@@ -55,7 +55,7 @@ def export_run(run_dir: Path, dest: Path) -> Path:
         raise UserError(f"{run_dir}: no trained imitator or latent stage to export")
     out = dest / "spec.yaml"
     header = f"# Exported from the run {run_dir.name} by `mocap export`; checkpoint paths are relative to this file.\n"
-    out.write_text(header + yaml.safe_dump(doc, sort_keys=False))
+    atomic_write_text(out, header + yaml.safe_dump(doc, sort_keys=False))
     return out
 
 

@@ -82,6 +82,13 @@ def in_start_frame(body_pos: Tensor, origin: Tensor, heading: Tensor) -> Tensor:
     return quat_apply(q, rel)
 
 
+def fallen_down(body_pos: Tensor, body_contact: Tensor, allowed: Tensor, fall_height: float) -> Tensor:
+    """(N,) bool: a body other than the ``allowed`` ones (the feet) touches the ground *and* its origin
+    is below ``fall_height`` (the generation protocol's fall, PULSE's code: contact and height < 0.15 m)."""
+    below = body_pos[..., 2] < fall_height
+    return (body_contact & ~allowed.to(body_contact.device) & below).any(-1)
+
+
 def pairwise_diversity(traj: Tensor) -> float:
     """Mean over pairs i < j of mean_{t,b} ‖traj[t, i, b] − traj[t, j, b]‖ for (T, N, B, 3) trajectories."""
     T, N, B, _ = traj.shape
@@ -220,8 +227,7 @@ def evaluate_generation(
                     ) from None
             state = sim.step(targets)
             body[k] = state.body_pos.float().cpu()
-            below = state.body_pos[..., 2] < p.fall_height
-            down = (state.body_contact & ~allowed & below).any(-1).cpu()
+            down = fallen_down(state.body_pos, state.body_contact, allowed, p.fall_height).cpu()
             first_fall = torch.where((first_fall < 0) & down, torch.full_like(first_fall, k), first_fall)
             if state.unstable.numel():
                 unstable |= state.unstable.cpu()
@@ -393,6 +399,7 @@ __all__ = [
     "render_generation",
     "dataset_transitions",
     "evaluate_generation",
+    "fallen_down",
     "heading_frame",
     "in_start_frame",
     "motion_matching",

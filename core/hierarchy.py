@@ -20,7 +20,27 @@ trains a policy with PPO on a :class:`TaskEnv`:
 Tasks never see which latent space drives the humanoid; latent spaces never see the task. Optional
 task attributes used here: ``episode_steps``, ``max_reward``, ``sim_overrides`` (simulator params
 the task needs, e.g. the strike target), ``attach(sim)``, ``step(state)`` (after each reward),
-``state_dict()`` / ``load_state_dict()`` (goals, for exact resume).
+``state_dict()`` / ``load_state_dict()`` (goals, for exact resume), and for tasks that follow a
+reference motion (``vr_tracking``, ``hmd_tracking``, ``motion_tracking``):
+
+* ``motions=``: :func:`make_task_env` passes the env's :class:`~mocap.motion.library.MotionLibrary`
+  to a task factory that names a ``motions`` parameter or takes ``**kwargs`` (others are called as before);
+* ``reference_start(env_ids, clip_ids, times)``: called on every reset, before ``task.reset``, with
+  the (clip, time) each reset env was started from (reference-state initialization);
+* ``truncated(state)``: (N,) bool, the episode ends without failing (e.g. its clip ran out), OR-ed
+  with the time limit.
+
+Further optional task attributes (``terrain``, ``inbetween``, ``generation``):
+
+* ``attach_motions(library)``: called once with the env's motion library;
+* ``start_state(env_ids, frames) -> HumanoidState``: may replace the start frames drawn from the
+  library before the simulator is reset to them (terrain: moved onto the flat spawn square;
+  inbetween: moved back so that a whole keyframe sequence fits in the clip); ``frames`` is a
+  :class:`~mocap.state.MotionFrames` (``clip_ids``, ``times``); when it returns MotionFrames, their
+  ``clip_ids`` / ``times`` are what ``reference_start`` receives;
+* ``prior_rollout`` (bool) and ``prior_noise_scale``: the task action is ignored and every step
+  decodes ``latent.random_action(obs, prior_noise_scale, generator)`` (a rollout of the latent
+  space's prior, as :mod:`mocap.generation`); a latent space without a prior (``scratch``) is refused.
 
 ``scratch`` (registered here) is the no-latent baseline: a latent space whose task action is the
 PD target itself, ``q = offset + scale · a`` with ``a`` in [-1, 1] mapped to each joint's range
@@ -29,6 +49,7 @@ PD target itself, ``q = offset + scale · a`` with ``a`` in [-1, 1] mapped to ea
 
 from __future__ import annotations
 
+import inspect
 from typing import Any, Callable
 
 import numpy as np
@@ -42,7 +63,7 @@ from mocap.motion.library import MotionLibrary
 from mocap.observations import proprioception
 from mocap.rl.env import StepResult
 from mocap.skeleton import Skeleton
-from mocap.state import HumanoidState, Observations, SimState
+from mocap.state import HumanoidState, MotionFrames, Observations, SimState
 
 STATE_FORMAT = "mocap.task_env/1"
 _HUMANOID_FIELDS = ("root_pos", "root_rot", "root_lin_vel", "root_ang_vel", "dof_pos", "dof_vel")
@@ -124,9 +145,22 @@ class TaskEnv:
             latent.eval()
         # the decoder's raw output (PULSE: decode_action; its `decoder` maps through an attached imitator)
         self._decode = getattr(latent, "decode_action", None) or latent.decoder
+        #: the generation task: the task action is ignored, the latent prior is rolled out
+        self.prior_rollout = bool(getattr(task, "prior_rollout", False))
+        self.prior_noise_scale = float(getattr(task, "prior_noise_scale", 1.0))
+        self._prior_gen = torch.Generator().manual_seed(int(seed) + 1)
+        if self.prior_rollout and not callable(getattr(latent, "random_action", None)):
+            raise ValueError(
+                f"task {type(task).__name__} rolls out the latent space's prior, and {type(latent).__name__} has none "
+                "(no random_action): `scratch` is the no-latent baseline, there is no prior to sample; use a trained "
+                "latent space (pulse, hybrid_rvq)"
+            )
         attach = getattr(task, "attach", None)
         if callable(attach):
             attach(sim)
+        attach_motions = getattr(task, "attach_motions", None)
+        if callable(attach_motions):
+            attach_motions(library)
 
     # ------------------------------------------------------------------------------- helpers
     def _proprio(self, state: SimState) -> Observations:
@@ -139,9 +173,21 @@ class TaskEnv:
         from mocap.generation import start_states
 
         clip_ids, times = start_states(self.library, len(ids), self.skeleton, self.start_min_height, self._gen)
-        self.sim.reset(ids, self.library.frames(clip_ids, times))
+        frames: HumanoidState = self.library.frames(clip_ids, times)
+        start_state = getattr(self.task, "start_state", None)
+        if callable(start_state):  # terrain spawn square, keyframe-sequence start
+            frames = start_state(ids, frames)
+            if isinstance(frames, MotionFrames):
+                clip_ids, times = frames.clip_ids, frames.times
+        self.sim.reset(ids, frames)
+        reset_latent = getattr(self.latent, "reset_envs", None)
+        if callable(reset_latent):  # latents with per-env state (VMP: the tracker's action history)
+            reset_latent(ids)
         self.steps[ids] = 0
         self.ep_return[ids] = 0.0
+        reference_start = getattr(self.task, "reference_start", None)
+        if callable(reference_start):  # tasks that track the reference they were started from
+            reference_start(ids, clip_ids, times)
         self.task.reset(ids, self.sim.state)
 
     # ---------------------------------------------------------------------------------- VecEnv
@@ -154,8 +200,11 @@ class TaskEnv:
     def pd_targets(self, state: SimState, actions: Tensor) -> Tensor:
         """PD targets of task actions ``actions`` in ``state`` through the frozen latent space."""
         obs = self._proprio(state)
-        z = self.latent.to_latent(obs, actions)
-        raw = self._decode(obs, z)
+        if self.prior_rollout:
+            raw = self.latent.random_action(obs, noise_scale=self.prior_noise_scale, generator=self._prior_gen)
+        else:
+            z = self.latent.to_latent(obs, actions)
+            raw = self._decode(obs, z)
         return self.map_targets(obs, raw)
 
     def step(self, actions: Tensor) -> StepResult:
@@ -170,7 +219,11 @@ class TaskEnv:
         self.ep_return += reward
         unstable = state.unstable.cpu() if state.unstable.numel() else torch.zeros(self.num_envs, dtype=torch.bool)
         terminated = self.task.terminated(state).cpu().bool() | unstable
-        truncated = (self.steps >= self.episode_steps) & ~terminated
+        truncated = self.steps >= self.episode_steps
+        task_truncated = getattr(self.task, "truncated", None)
+        if callable(task_truncated):  # e.g. the tracked clip ran out
+            truncated = truncated | task_truncated(state).cpu().bool()
+        truncated = truncated & ~terminated
         final_obs = self._observe(state)
         done = terminated | truncated
         episodes: dict[str, Tensor] = {}
@@ -201,6 +254,7 @@ class TaskEnv:
             "generator": self._gen.get_state().clone(),
             "steps": self.steps.clone(),
             "ep_return": self.ep_return.clone(),
+            "prior_generator": self._prior_gen.get_state().clone(),
         }
         if hasattr(self.sim, "get_physics_state"):
             sd["physics"] = torch.from_numpy(np.array(self.sim.get_physics_state(), dtype=np.float64, copy=True))
@@ -210,6 +264,9 @@ class TaskEnv:
         task_sd = getattr(self.task, "state_dict", None)
         if callable(task_sd):
             sd["task"] = task_sd()
+        latent_sd = getattr(self.latent, "task_state_dict", None)
+        if callable(latent_sd):
+            sd["latent"] = latent_sd()
         return sd
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
@@ -220,6 +277,8 @@ class TaskEnv:
         self._gen.set_state(state["generator"].clone())
         self.steps = state["steps"].clone()
         self.ep_return = state["ep_return"].clone()
+        if "prior_generator" in state:
+            self._prior_gen.set_state(state["prior_generator"].clone())
         ids = torch.arange(self.num_envs)
         if "physics" in state and hasattr(self.sim, "set_physics_state"):
             phys = state["physics"]
@@ -229,10 +288,21 @@ class TaskEnv:
             self.sim.reset(ids, HumanoidState(**{k: v for k, v in state["sim_state"].items()}))
         if "task" in state and callable(getattr(self.task, "load_state_dict", None)):
             self.task.load_state_dict(state["task"])
+        if "latent" in state and callable(getattr(self.latent, "load_task_state_dict", None)):
+            self.latent.load_task_state_dict(state["latent"])
         self._obs = self._observe(self.sim.state)
 
     def close(self) -> None:
         self.sim.close()
+
+
+def _accepts(factory: Callable[..., Any], name: str) -> bool:
+    """``factory`` has a parameter ``name`` or takes ``**kwargs``."""
+    try:
+        params = inspect.signature(factory).parameters.values()
+    except (TypeError, ValueError):  # no signature (a builtin): do not pass extras
+        return False
+    return any(p.name == name or p.kind is inspect.Parameter.VAR_KEYWORD for p in params)
 
 
 def make_task_env(ctx: Any, num_envs: int) -> TaskEnv:
@@ -246,14 +316,18 @@ def make_task_env(ctx: Any, num_envs: int) -> TaskEnv:
         raise StageFailed("the task stage needs a latent space (use `latent: {name: scratch}` for a policy without one)")
     skeleton = ctx.skeleton
     task_ref = spec.task
-    task = ctx.plugins.get("task", task_ref.name).build(ctx.params("task"), skeleton=skeleton, num_envs=num_envs, device="cpu")
+    motion_set = ctx.build("motions").load(skeleton)
+    library = MotionLibrary(motion_set, skeleton)
+    component = ctx.plugins.get("task", task_ref.name)
+    extra: dict[str, Any] = {"motions": library} if _accepts(component.factory, "motions") else {}
+    task = component.build(ctx.params("task"), skeleton=skeleton, num_envs=num_envs, device="cpu", **extra)
     latent_stage = ctx.upstream.get("latent")
     latent_ckpt = latent_stage.checkpoint if latent_stage is not None else None
     if latent_ckpt is None and spec.latent.trainer is not None:
         raise StageFailed("the latent stage has no checkpoint")
     latent = ctx.stage_component("latent", checkpoint=latent_ckpt)
     label = "pd_targets"
-    if latent_ckpt is not None:
+    if latent_ckpt is not None and not getattr(latent, "decodes_pd_targets", False):
         from mocap.distill import load_latent_state
 
         label = str(load_latent_state(latent_ckpt)["extra"].get("label", "policy_output"))
@@ -263,15 +337,17 @@ def make_task_env(ctx: Any, num_envs: int) -> TaskEnv:
         imitator_stage = ctx.upstream.get("imitator")
         imitator = ctx.stage_component("imitator", checkpoint=imitator_stage.checkpoint if imitator_stage else None)
         mapping = imitator.to_pd_targets
-    motion_set = ctx.build("motions").load(skeleton)
-    library = MotionLibrary(motion_set, skeleton)
     sim_ref = spec.simulator
     sim_params = ctx.params("simulator")
     overrides = getattr(task, "sim_overrides", None) or {}
     if overrides:
         sim_params = type(sim_params).model_validate({**sim_params.model_dump(), **overrides})
     sim = ctx.plugins.get("simulator", sim_ref.name).build(sim_params, skeleton=skeleton, num_envs=num_envs, seed=ctx.seed)
-    env = TaskEnv(task, latent, mapping, library, sim, seed=ctx.seed)
+    try:
+        env = TaskEnv(task, latent, mapping, library, sim, seed=ctx.seed)
+    except ValueError as exc:  # e.g. the generation task with scratch (no prior)
+        sim.close()
+        raise StageFailed(f"task {task_ref.name} with latent {spec.latent.name}: {exc}") from None
     space = env.action_space
     probe = (
         torch.zeros(num_envs, len(space.nvec), dtype=torch.long) if hasattr(space, "nvec") else torch.zeros(num_envs, *space.shape)

@@ -19,7 +19,9 @@ lock makes parallel cells wait for each other instead of training it twice.
 A cell's name joins ``<last path part>-<label>`` for every axis, where a value's label is its
 ``name`` (mappings) or the value itself (scalars), e.g. ``latent-pulse_name-speed_seed-0``.
 ``runs/<name>/comparison.md`` / ``.json`` tabulate every cell's final stage metrics and, over the
-``seed`` axis, their mean ± std.
+``seed`` axis, their mean ± std; ``comparison.md`` embeds ``comparison_curves.png`` (learning curves,
+mean ± std over seeds) and ``comparison_final.png`` (final metrics with error bars), see
+:func:`mocap.report.write_comparison_plots`.
 """
 
 from __future__ import annotations
@@ -180,10 +182,38 @@ def comparison(cells: list[Cell], out_dir: Path, seed_axis: str = "seed") -> dic
             mean = sum(vals) / len(vals)
             std = math.sqrt(sum((v - mean) ** 2 for v in vals) / len(vals)) if len(vals) > 1 else 0.0
             summary[key][m] = {"mean": mean, "std": std, "n": len(vals)}
-    data = {"cells": rows, "groups": summary}
+    data: dict[str, Any] = {"cells": rows, "groups": summary}
+    plots = _plots(groups, summary, out_dir)
+    data["plots"] = [name for name, _ in plots if name]
     (out_dir / "comparison.json").write_text(json.dumps(data, indent=2) + "\n")
-    (out_dir / "comparison.md").write_text(render(summary))
+    (out_dir / "comparison.md").write_text(render(summary) + render_plots(plots))
     return data
+
+
+def _plots(groups: dict[str, list[str]], summary: dict[str, dict[str, dict[str, float]]], out_dir: Path) -> list[tuple[str, str]]:
+    """Learning curves with a seed band and final-metric bars (:func:`mocap.report.write_comparison_plots`):
+    ``[(file name, caption)]``, or ``[("", note)]`` when plots cannot be made."""
+    from mocap.report import COMPARISON_CURVES, PlotsUnavailable, write_comparison_plots
+
+    present = [m for m in KEY_METRICS if any(m in g for g in summary.values())]
+    try:
+        written = write_comparison_plots({k: [out_dir / n for n in names] for k, names in groups.items()}, summary, present, out_dir)
+    except PlotsUnavailable as exc:
+        return [("", str(exc))]
+    except Exception as exc:  # noqa: BLE001 - a plot must never fail a finished comparison
+        return [("", f"plots skipped: {type(exc).__name__}: {exc}")]
+    captions = {COMPARISON_CURVES: "learning curves: mean ± std over seeds"}
+    return [(p.name, captions.get(p.name, "final metrics: mean ± std over seeds")) for p in written]
+
+
+def render_plots(plots: list[tuple[str, str]]) -> str:
+    """The markdown that embeds the comparison plots (or says why there are none)."""
+    if not plots:
+        return ""
+    lines = ["", "## Plots", ""]
+    for name, caption in plots:
+        lines += [f"![{caption}]({name})" if name else caption, ""]
+    return "\n".join(lines)
 
 
 #: metrics shown in the markdown table when present (all are in comparison.json)
@@ -199,6 +229,13 @@ KEY_METRICS = (
     "eval/rot_err",
     "eval/fall_rate",
     "eval/diversity_m",
+    # eval_suite (mocap.suite): imitation and generation side by side
+    "eval/imitation/success_rate",
+    "eval/imitation/mpjpe_g",
+    "eval/imitation/mpjpe_g_succ",
+    "eval/generation/fall_rate",
+    "eval/generation/time_to_fall_s",
+    "eval/generation/diversity_m",
 )
 
 

@@ -12,6 +12,11 @@ or name neither trainer nor checkpoint (an untrained component, e.g. a baseline)
 
 Run directory (``runs/<spec name>`` unless ``--out``): ``spec.yaml`` (resolved), ``metrics.jsonl``,
 ``tb/`` (TensorBoard), ``stages.json`` (artifact dir and result of every stage), ``report.md``.
+
+Under torchrun (:mod:`mocap.distributed`) every rank runs this same loop: rank 0 takes the artifact
+lock, decides reuse and broadcasts its decision and each stage's result, and alone writes the run's
+files; a trainer with ``data_parallel = True`` runs on every rank (seed :func:`mocap.distributed.rank_seed`
+of the stage seed), any other trainer runs on rank 0 alone while the other ranks wait.
 """
 
 from __future__ import annotations
@@ -31,6 +36,7 @@ import torch
 from pydantic import BaseModel
 from rich.console import Console
 
+from mocap import distributed as dist
 from mocap.checkpoint import atomic_write_json, atomic_write_text, hardware, package_versions
 from mocap.interfaces import StageResult
 from mocap.plugins import PluginSet
@@ -245,11 +251,17 @@ def run_pipeline(
     spec = resolved.spec
     out_dir = Path(out_dir)
     store = Path(store) if store is not None else artifact_store(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out_dir / "spec.yaml", resolved.to_yaml())
+    main = dist.is_main()  # rank 0 under torchrun, else the one process
+    if not main:  # the other ranks of a data-parallel run are quiet and write nothing
+        console = _quiet_console()
+    else:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(out_dir / "spec.yaml", resolved.to_yaml())
     if spec.torch_threads is not None:
         torch.set_num_threads(spec.torch_threads)
-    device = resolve_device(spec.device)
+    device = dist.init(resolve_device(spec.device))  # under torchrun: join the group; this rank's device
+    if dist.world_size() > 1:
+        console.print(f"data-parallel: {dist.world_size()} processes ({device.type}); rank 0 writes {out_dir}", highlight=False)
     keys = stage_keys(spec)
     records: list[StageRecord] = []
     upstream: dict[str, StageResult] = {}
@@ -261,13 +273,22 @@ def run_pipeline(
             record = _run_stage(stage, keys[stage], resolved, plugins, out_dir, store, upstream, device, console, stop)
             records.append(record)
             upstream[stage] = record.result
-            _write_stages(out_dir, records, spec.seed)
+            if main:
+                _write_stages(out_dir, records, spec.seed)
             if stop.requested:
                 raise PipelineInterrupted(stage)
-    from mocap.report import write_report
+    if main:
+        from mocap.report import write_report
 
-    write_report(out_dir, resolved, records, wall_seconds=time.time() - started)
+        write_report(out_dir, resolved, records, wall_seconds=time.time() - started)
+    dist.barrier()  # the run's files are complete before any rank returns
     return records
+
+
+def _quiet_console() -> Console:
+    import io
+
+    return Console(file=io.StringIO(), quiet=True)
 
 
 def _run_stage(
@@ -282,8 +303,11 @@ def _run_stage(
     console: Console,
     stop: _StopFlag,
 ) -> StageRecord:
-    store.mkdir(parents=True, exist_ok=True)
-    with _stage_lock(store / f".{stage}-{key}.lock", stage, console):
+    if dist.is_main():
+        store.mkdir(parents=True, exist_ok=True)
+    # data-parallel: rank 0 holds the lock for all ranks (the others follow its decisions)
+    lock = _stage_lock(store / f".{stage}-{key}.lock", stage, console) if dist.is_main() else contextlib.nullcontext()
+    with lock:
         return _run_stage_locked(stage, key, resolved, plugins, out_dir, store, upstream, device, console, stop)
 
 
@@ -322,18 +346,21 @@ def _run_stage_locked(
     workdir = store / f"{stage}-{key}"
     done = workdir / DONE_FILE
     t0 = time.time()
-    if done.is_file():
-        result = _read_result(done)
+    main = dist.is_main()
+    # rank 0 decides (under the artifact lock) and the other ranks take its answer
+    reuse = dist.broadcast_object(_read_result(done) if main and done.is_file() else None)
+    if reuse is not None:
+        result = reuse
         console.print(f"[green]{stage}[/]: reusing the trained artifact {workdir} (same {stage} section and upstream as an earlier run)")
         published = workdir / PUBLISHED_DIR
-        if published.is_dir():  # the stage's tables and videos belong in this run directory too
+        if main and published.is_dir():  # the stage's tables and videos belong in this run directory too
             for item in published.iterdir():
                 if item.is_file():
                     shutil.copy2(item, out_dir / item.name)
         return StageRecord(stage, key, workdir, result, True, 0.0)
     checkpoint = getattr(section, "checkpoint", None)
     if checkpoint is not None:
-        if not Path(checkpoint).is_file():
+        if not dist.broadcast_object(Path(checkpoint).is_file()):
             raise StageFailed(f"{stage}.checkpoint: {checkpoint}: no such file")
         console.print(f"[green]{stage}[/]: using checkpoint {checkpoint}")
         return StageRecord(stage, key, workdir, StageResult(checkpoint=Path(checkpoint)), True, 0.0)
@@ -341,9 +368,11 @@ def _run_stage_locked(
     if trainer_ref is None:
         console.print(f"[green]{stage}[/]: {section.name} needs no training")
         return StageRecord(stage, key, workdir, StageResult(checkpoint=None), False, 0.0)
-    workdir.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(workdir / "spec.yaml", resolved.to_yaml())
-    log = MetricsLogger(out_dir / "metrics.jsonl", stage, tensorboard_dir=out_dir / "tb")
+    if main:
+        workdir.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(workdir / "spec.yaml", resolved.to_yaml())
+    dist.barrier()  # the stage directory exists for every rank
+    log = MetricsLogger(out_dir / "metrics.jsonl", stage, tensorboard_dir=out_dir / "tb")  # writes on rank 0 only
     ctx = StageContext(
         stage=stage,
         resolved=resolved,
@@ -360,16 +389,37 @@ def _run_stage_locked(
     trainer = ctx.build(f"{stage}.trainer")
     verb = "resuming" if any(workdir.glob("*.pt")) else "running"
     console.print(f"[bold]{stage}[/]: {verb} trainer {trainer_ref.name!r} in {workdir}")
+    parallel = dist.world_size() > 1
+    data_parallel = parallel and bool(getattr(trainer, "data_parallel", False))
+    if data_parallel:
+        ctx.seed = dist.rank_seed(ctx.seed)  # each rank its own environments
+    elif parallel:
+        console.print(
+            f"[yellow]{stage}[/]: trainer {trainer_ref.name!r} is not data-parallel; rank 0 runs it alone "
+            f"while the other {dist.world_size() - 1} process(es) wait",
+            highlight=False,
+        )
+    result: StageResult | None = None
     try:
-        result = trainer.run(ctx)
+        if data_parallel or not parallel:
+            result = trainer.run(ctx)
+        elif main:
+            with dist.solo():
+                result = trainer.run(ctx)
     finally:
         log.close()
         published = workdir / PUBLISHED_DIR
-        if published.is_dir():
+        if main and published.is_dir():
             for item in published.iterdir():
                 if item.is_file():
                     shutil.copy2(item, out_dir / item.name)
-    if not stop.requested:
+    if parallel:
+        # all ranks agree on an interruption (Ctrl-C reaching any of them) and on rank 0's result
+        if dist.any_true(stop.requested):
+            stop.requested = True
+        result = dist.broadcast_object(result)
+    assert result is not None
+    if not stop.requested and main:
         atomic_write_json(
             done,
             {

@@ -14,16 +14,25 @@ class MetricsLogger:
 
     On resume, :meth:`truncate_after` drops lines logged after the checkpoint's step so that a
     run interrupted between a log write and a checkpoint never shows a step twice.
+
+    ``enabled=False`` makes it write nothing (the default, None, enables it only on the main
+    process of a data-parallel run, :func:`mocap.distributed.is_main`).
     """
 
-    def __init__(self, path: Path, stage: str, tensorboard_dir: Path | None = None):
+    def __init__(self, path: Path, stage: str, tensorboard_dir: Path | None = None, *, enabled: bool | None = None):
+        from mocap.distributed import is_main
+
         self.path = Path(path)
         self.stage = stage
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.enabled = is_main() if enabled is None else bool(enabled)
+        if self.enabled:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
         self._tb_dir = tensorboard_dir
         self._tb: Any = None
 
     def log(self, step: int, **metrics: float) -> None:
+        if not self.enabled:
+            return
         record = {"stage": self.stage, "step": int(step), "time": round(time.time(), 3)}
         for key, value in metrics.items():
             value = float(value)
@@ -37,6 +46,8 @@ class MetricsLogger:
                     writer.add_scalar(f"{self.stage}/{key}", float(value), int(step))
 
     def _writer(self) -> Any:
+        if not self.enabled:
+            return None
         if self._tb is None and self._tb_dir is not None:
             from torch.utils.tensorboard import SummaryWriter
 
@@ -58,6 +69,8 @@ class MetricsLogger:
         """Keep only this stage's records with ``step <= step`` (and every other stage's)."""
         from mocap.checkpoint import atomic_write_text
 
+        if not self.enabled:
+            return
         kept = [r for r in self.records() if r.get("stage") != self.stage or r.get("step", 0) <= step]
         atomic_write_text(self.path, "".join(json.dumps(r) + "\n" for r in kept))
 

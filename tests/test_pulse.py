@@ -342,10 +342,10 @@ def test_normalizers_running_teacher_and_none():
 
 
 def test_params_validation_and_refusals():
-    with pytest.raises(ValidationError, match="not built"):
-        PulseParams(rl_term=True)
-    with pytest.raises(ValidationError, match="not built"):
-        PulseParams(latent_kind="vq")
+    # the RL term and the VQ latent are built (tests/test_pulse_ablations.py); their bad combinations are refused
+    assert PulseParams(rl_term=True).rl_term and PulseParams(latent_kind="vq", latent_dim=64).latent_kind == "vq"
+    with pytest.raises(ValidationError, match="vq_partitions"):
+        PulseParams(latent_kind="vq", latent_dim=32, vq_partitions=5)
     with pytest.raises(ValidationError, match="beta_anneal"):
         PulseParams(beta_anneal=(0.6, 0.5))
     with pytest.raises(ValidationError):

@@ -122,6 +122,12 @@ class Clip:
                     raise MotionDataError(f"{path}: not a mocap clip file (missing {', '.join(sorted(missing))})")
                 if str(data["format"]) != FORMAT_NAME:
                     raise MotionDataError(f"{path}: format is {str(data['format'])!r}, expected {FORMAT_NAME!r}")
+                version = int(data["version"]) if "version" in keys else FORMAT_VERSION
+                if version != FORMAT_VERSION:
+                    raise MotionDataError(
+                        f"{path}: clip format version {version}, but this mocap reads version {FORMAT_VERSION}"
+                        + ("; a newer mocap wrote it: upgrade mocap" if version > FORMAT_VERSION else "")
+                    )
                 clip = cls(
                     name=str(data["name"]),
                     skeleton=str(data["skeleton"]),

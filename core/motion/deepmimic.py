@@ -81,9 +81,16 @@ ROOT_BODY = "pelvis"
 
 
 def default_data_dir() -> Path:
-    """``pybullet_data.getDataPath()/data/motions`` (the bundled clips; not copied into this repo)."""
-    import pybullet_data
+    """``pybullet_data.getDataPath()/data/motions`` (the bundled clips; not copied into this repo).
 
+    Without ``pybullet_data`` (a broken or incomplete install) a :class:`MotionDataError` says what to install."""
+    try:
+        import pybullet_data
+    except ImportError as exc:
+        raise MotionDataError(
+            f"the DeepMimic clips come from the pybullet_data package, which is missing or broken ({exc}); "
+            "install it: pip install pybullet (or set the deepmimic source's data_dir to a folder of humanoid3d_*.txt files)"
+        ) from None
     return Path(pybullet_data.getDataPath()) / "data" / "motions"
 
 

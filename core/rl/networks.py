@@ -29,7 +29,7 @@ from typing import Any, NamedTuple, Sequence
 import torch
 from torch import Tensor, nn
 
-from mocap.checkpoint import load_checkpoint, save_checkpoint
+from mocap.checkpoint import CheckpointError, check_format, load_checkpoint, save_checkpoint
 from mocap.interfaces import ActionSpace, Box, MultiDiscrete
 from mocap.rl.normalizer import RunningNormalizer
 
@@ -280,10 +280,14 @@ def load_policy(path: Path, map_location: str | torch.device = "cpu") -> ActorCr
         config, state = data["config"], data["state_dict"]
     elif "policy_config" in data and "model" in data:  # a trainer's resumable checkpoint (e.g. ppo.pt mid-training)
         config, state = data["policy_config"], data["model"]
-    else:
-        raise ValueError(f"{path}: not a policy file (format {data.get('format')!r}, expected {POLICY_FORMAT!r})")
-    model = ActorCritic.from_config(config)
-    model.load_state_dict(state)
+    else:  # a CheckpointError: another file, or another version of the policy format (both versions named)
+        check_format(Path(path), data, POLICY_FORMAT, what="policy")
+        raise CheckpointError(f"{path}: not a policy file")  # pragma: no cover - check_format raised
+    try:
+        model = ActorCritic.from_config(config)
+        model.load_state_dict(state)
+    except (KeyError, TypeError, RuntimeError) as exc:
+        raise CheckpointError(f"{path}: the policy's configuration and weights do not fit together (corrupt file? {type(exc).__name__}: {exc})") from None
     return model.to(map_location).eval()
 
 

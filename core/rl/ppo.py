@@ -11,6 +11,16 @@ device: network, optimizer, normalizers, ``env.state_dict()``, the env's current
 torch/numpy/python RNG states, counters and the episode-statistics window. A run resumed from it
 produces the same weights as an uninterrupted one. The final policy goes to
 ``<workdir>/policy.pt`` (:func:`mocap.rl.networks.save_policy`; load with ``load_policy``).
+
+Data-parallel (under torchrun, :mod:`mocap.distributed`): every rank steps its own ``num_envs``
+envs (its own seed), so one iteration collects ``world_size × num_envs × horizon`` samples and the
+budget ``total_env_steps`` counts all ranks' samples (fewer iterations). Each rank computes the
+loss on its own minibatches (``minibatch_size`` per rank); gradients are averaged over ranks
+before the clip and the step, so the weights stay identical. Advantages are standardized with
+the mean/std of all ranks' batches; the observation (and value) normalizer statistics are merged
+exactly; the KL of the adaptive schedule is the ranks' mean. Rank 0 writes ``ppo.pt`` with every
+rank's env, observation, RNG state and episode window (``rank_states``), so each rank resumes its
+own stream; ranks the checkpoint lacks (more processes than before) start from fresh envs.
 """
 
 from __future__ import annotations
@@ -27,6 +37,7 @@ import torch
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 from torch import Tensor
 
+from mocap import distributed as dist
 from mocap.checkpoint import load_checkpoint, save_checkpoint
 from mocap.faults import FaultGuard
 from mocap.interfaces import Box, MultiDiscrete, StageResult, Trainer
@@ -223,6 +234,8 @@ def _set_rng_state(state: dict[str, Any]) -> None:
 class PPOTrainer(Trainer):
     """Trains an :class:`ActorCritic` on ``ctx.make_rl_env(num_envs)`` with PPO; resumes from ``ppo.pt``."""
 
+    data_parallel = True  # runs on every rank under torchrun (module docstring)
+
     def __init__(self, params: PPOParams | None = None):
         self.params = params or PPOParams()
 
@@ -260,6 +273,8 @@ class PPOTrainer(Trainer):
             raise ValueError(f"the env has {env.num_envs} envs, PPO asked for {p.num_envs}")
         space = env.action_space
         model = self.build_model(env.obs_dim, space).to(device)
+        parallel, world = dist.active(), dist.world_size()
+        dist.broadcast_module(model)  # data-parallel: every rank starts from rank 0's weights
         optimizer = torch.optim.Adam([q for q in model.parameters() if q.requires_grad], lr=p.lr)
         window: dict[str, deque[float]] = {}
 
@@ -271,19 +286,29 @@ class PPOTrainer(Trainer):
                 raise ValueError(f"{ckpt_path}: not a PPO checkpoint (format {ck.get('format')!r})")
             model.load_state_dict(ck["model"])
             optimizer.load_state_dict(ck["optimizer"])
-            env.load_state_dict(ck["env"])
-            obs = ck["obs"].to(device)
+            mine = _own_state(ck, dist.rank())
+            if mine is not None:
+                env.load_state_dict(mine["env"])
+                obs = mine["obs"].to(device)
+            else:  # a rank the checkpoint did not have: fresh envs of its own seed
+                obs = env.reset().to(device)
             iteration, env_steps = int(ck["iteration"]), int(ck["env_steps"])
-            window = {k: deque(v, maxlen=EPISODE_WINDOW) for k, v in ck["episode_window"].items()}
+            if mine is not None:
+                window = {k: deque(v, maxlen=EPISODE_WINDOW) for k, v in mine["episode_window"].items()}
             guard.load_state_dict(ck.get("faults", {}))
-            _set_rng_state(ck["rng"])
+            if mine is not None:
+                _set_rng_state(mine["rng"])
             ctx.log.truncate_after(iteration)
             ctx.console.print(f"ppo: resuming at iteration {iteration} ({env_steps:,} env steps)")
+            if int(ck.get("world_size", 1)) != world:
+                ctx.console.print(f"ppo: the checkpoint was written by {int(ck.get('world_size', 1))} process(es), resuming with {world}")
         else:
             ctx.log.truncate_after(0)  # lines from a run that crashed before its first checkpoint
             obs = env.reset().to(device)
-            if p.normalize_obs:
-                model.obs_norm.update(obs)  # first statistics from the initial states
+            if p.normalize_obs:  # first statistics from the initial states (of all ranks)
+                dist.sync_normalizers(model.obs_norm, lambda: model.obs_norm.update(obs))
+        # the budget counts every rank's samples; alone this is p.iterations
+        iterations = iteration + max(0, math.ceil((p.total_env_steps - env_steps) / (p.batch_size * world)))
 
         env_device = torch.device(getattr(env, "device", "cpu"))  # actions go back to the env's device
         low = high = None
@@ -297,6 +322,19 @@ class PPOTrainer(Trainer):
         steps_at_start = env_steps
 
         def save(final: bool = False) -> None:
+            extra: dict[str, Any] = {}
+            if parallel:  # every rank's own stream goes into rank 0's checkpoint
+                states = dist.gather_object(
+                    {
+                        "env": env.state_dict(),
+                        "obs": obs.detach().cpu(),
+                        "rng": _rng_state(),
+                        "episode_window": {k: list(v) for k, v in window.items()},
+                    }
+                )
+                if states is None:  # not rank 0: nothing to write
+                    return
+                extra = {"world_size": world, "rank_states": {r: st for r, st in enumerate(states) if r > 0}}
             save_checkpoint(
                 ckpt_path,
                 {
@@ -313,24 +351,25 @@ class PPOTrainer(Trainer):
                     "faults": guard.state_dict(),
                     "params": p.model_dump(mode="json"),
                     "finished": final,
+                    **extra,
                 },
                 spec_yaml=ctx.spec_yaml(),
             )
 
         progress = IterationProgress(
             ctx.console,
-            p.iterations,
+            iterations,
             p.print_every,
             "ppo",
             [("episode/return", "return", ".3g"), ("episode/length", "len", ".1f"), ("episode/success", "success", ".2f")],
         )
         try:
-            while iteration < p.iterations:
+            while iteration < iterations:
                 # ---------------------------------------------------------------- rollout
                 t0 = time.perf_counter()
                 if p.lr_schedule == "linear":
                     for group in optimizer.param_groups:
-                        group["lr"] = p.lr * (1.0 - iteration / p.iterations)
+                        group["lr"] = p.lr * (1.0 - iteration / iterations)
                 b_obs = torch.zeros((T, N, env.obs_dim), device=device)
                 b_act = torch.zeros((T, N, *act_shape), dtype=act_dtype, device=device)
                 b_logp = torch.zeros((T, N), device=device)
@@ -368,16 +407,17 @@ class PPOTrainer(Trainer):
                     last_value = model.value(obs)
                     b_next_val[T - 1] = torch.where(b_done[T - 1], b_next_val[T - 1], last_value)
                     advantages, returns = compute_gae(b_rew, b_val, b_next_val, b_term, b_done, p.gamma, p.gae_lambda)
-                env_steps += T * N
+                env_steps += T * N * world
                 t_rollout = time.perf_counter() - t0
 
                 # ----------------------------------------------------------------- update
                 t1 = time.perf_counter()
                 stats: dict[str, float] = {}
-                if guard.check_inputs(observations=b_obs, rewards=b_rew, advantages=advantages, returns=returns):
+                # (data-parallel: a non-finite input on any rank makes every rank skip the batch)
+                if dist.check_inputs(guard, observations=b_obs, rewards=b_rew, advantages=advantages, returns=returns):
                     stats = self._update(model, optimizer, b_obs, b_act, b_logp, b_val, advantages, returns, guard)
                     if p.normalize_obs:  # after the update, so that rollout and update saw the same statistics
-                        model.obs_norm.update(b_obs)
+                        dist.sync_normalizers(model.obs_norm, lambda x=b_obs: model.obs_norm.update(x))
                 t_update = time.perf_counter() - t1
                 iteration += 1
 
@@ -416,13 +456,19 @@ class PPOTrainer(Trainer):
 
                     for key, val in (hook(iteration, policy_fn) or {}).items():
                         log[f"eval/{key}"] = float(val)
+                if parallel:  # one line for all ranks: sums, slowest times, means, pooled episode windows
+                    log = dist.reduce_metrics(
+                        log, sums=("episodes_finished",), maxima=("time/rollout_s", "time/update_s"), windows=window
+                    )
+                    log["steps_per_s"] = T * N * world / max(log["time/rollout_s"] + log["time/update_s"], 1e-9)
+                    log["rollout_steps_per_s"] = T * N * world / max(log["time/rollout_s"], 1e-9)
                 ctx.log.log(iteration, **log)
                 last_stats = log
                 progress.update(iteration, env_steps, log)
 
-                stop = ctx.should_stop()
-                if stop or iteration % p.checkpoint_every == 0 or iteration >= p.iterations:
-                    save(final=iteration >= p.iterations)
+                stop = dist.any_true(ctx.should_stop()) if parallel else ctx.should_stop()
+                if stop or iteration % p.checkpoint_every == 0 or iteration >= iterations:
+                    save(final=iteration >= iterations)
                 if stop:
                     ctx.console.print(f"ppo: stopped at iteration {iteration}; checkpoint {ckpt_path}")
                     return StageResult(checkpoint=ckpt_path, metrics=_summary(last_stats, iteration, env_steps))
@@ -434,7 +480,10 @@ class PPOTrainer(Trainer):
             last_stats = {f"episode/{k}": float(np.mean(v)) for k, v in window.items() if v}
         metrics = _summary(last_stats, iteration, env_steps)
         policy_path = workdir / POLICY_NAME
-        save_policy(policy_path, model, extra={"trainer": "ppo", "metrics": metrics}, spec_yaml=ctx.spec_yaml())
+        if parallel:
+            dist.assert_in_sync(model, "ppo")
+        if dist.is_main():
+            save_policy(policy_path, model, extra={"trainer": "ppo", "metrics": metrics}, spec_yaml=ctx.spec_yaml())
         return StageResult(checkpoint=policy_path, metrics=metrics)
 
     # ------------------------------------------------------------------------------ update
@@ -462,10 +511,14 @@ class PPOTrainer(Trainer):
         ret = returns.reshape(B)
         old_val = b_val.reshape(B)
         if p.normalize_advantage:
-            adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+            if dist.active():  # data-parallel: standardized over all ranks' samples
+                adv_mean, adv_std = dist.global_mean_std(adv)
+                adv = (adv - adv_mean) / (adv_std + 1e-8)
+            else:
+                adv = (adv - adv.mean()) / (adv.std() + 1e-8)
         if p.normalize_value:
-            # the critic regresses standardized targets; statistics updated once per batch
-            model.value_norm.update(ret)
+            # the critic regresses standardized targets; statistics updated once per batch (of all ranks)
+            dist.sync_normalizers(model.value_norm, lambda: model.value_norm.update(ret))
             ret_t = model.value_norm.normalize(ret)
             old_val_t = model.value_norm.normalize(old_val)
         else:
@@ -489,8 +542,15 @@ class PPOTrainer(Trainer):
                 loss = pg_loss + p.value_coef * v_loss - p.entropy_coef * entropy + p.bounds_coef * b_loss
                 optimizer.zero_grad(set_to_none=True)
                 loss.backward()
+                step_loss, mean_kl = loss, None
+                if dist.active():
+                    # data-parallel: average gradients (and loss, KL) over the ranks; a non-finite
+                    # value on any rank makes the averaged loss/gradient non-finite everywhere
+                    with torch.no_grad():
+                        local_kl = ((ratio - 1) - log_ratio).mean()
+                    step_loss, mean_kl = dist.average_gradients(params, loss, local_kl)
                 # global-norm clip (max_grad_norm None: inf, i.e. only measure the norm); skipped if not finite
-                stepped, grad_norm = guard.step(optimizer, loss, params, p.max_grad_norm)
+                stepped, grad_norm = guard.step(optimizer, step_loss, params, p.max_grad_norm)
                 if not stepped:
                     continue
                 with torch.no_grad():
@@ -498,8 +558,9 @@ class PPOTrainer(Trainer):
                     approx_kl = ((ratio - 1) - log_ratio).mean()
                     clip_frac = ((ratio - 1).abs() > p.clip).float().mean()
                 if p.lr_schedule == "adaptive":
+                    kl = float(approx_kl) if mean_kl is None else float(mean_kl)
                     for group in optimizer.param_groups:
-                        group["lr"] = adapt_lr(group["lr"], float(approx_kl), p.desired_kl, p.lr_min, p.lr_max)
+                        group["lr"] = adapt_lr(group["lr"], kl, p.desired_kl, p.lr_min, p.lr_max)
                 for key, val in (
                     ("loss/policy", pg_loss),
                     ("loss/value", v_loss),
@@ -515,6 +576,14 @@ class PPOTrainer(Trainer):
         model.eval()
         steps = max(done_steps, 1)
         return {k: v / steps for k, v in sums.items()}
+
+
+def _own_state(ck: dict[str, Any], rank: int) -> dict[str, Any] | None:
+    """This rank's env / observation / RNG / episode-window state in a checkpoint (rank 0: the
+    top-level fields, which a single-process run also writes); None when the checkpoint lacks it."""
+    if rank == 0:
+        return {k: ck[k] for k in ("env", "obs", "rng", "episode_window")}
+    return (ck.get("rank_states") or {}).get(rank)
 
 
 def adapt_lr(lr: float, kl: float, desired_kl: float, lr_min: float, lr_max: float) -> float:

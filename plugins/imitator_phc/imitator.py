@@ -225,10 +225,19 @@ def make_phc(
             return make_composite_imitator(params, skeleton, data, device)
         want = params.observation().dim(skeleton.num_bodies)
         got = getattr(policy, "obs_dim", want)
-        if got != want:
-            raise ValueError(
-                f"{checkpoint}: the policy takes {got} observation dims, but phc with obs={params.obs!r} on "
-                f"{skeleton.name!r} ({skeleton.num_bodies} bodies) produces {want}"
+        got_actions = getattr(policy, "action_dim", skeleton.num_dofs)
+        if got != want or got_actions != skeleton.num_dofs:
+            from mocap.checkpoint import CheckpointError, embedded_humanoid, load_checkpoint
+
+            trained = embedded_humanoid(load_checkpoint(Path(checkpoint)))
+            if trained is not None and trained != skeleton.name:
+                raise CheckpointError(
+                    f"{checkpoint}: this checkpoint was trained for humanoid {trained} with {got_actions} actions "
+                    f"({got} observation dims); the spec asks for {skeleton.name} with {skeleton.num_dofs} ({want})"
+                )
+            raise CheckpointError(
+                f"{checkpoint}: the policy takes {got} observation dims and gives {got_actions} actions, but phc with "
+                f"obs={params.obs!r} on {skeleton.name!r} ({skeleton.num_bodies} bodies) needs {want} and {skeleton.num_dofs}"
             )
     return PHCImitator(params, skeleton, policy, device)
 

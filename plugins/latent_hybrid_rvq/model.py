@@ -72,7 +72,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 import torch
-from mocap.checkpoint import load_checkpoint, save_checkpoint
+from mocap.checkpoint import CheckpointError, embedded_humanoid, load_checkpoint, save_checkpoint
 from mocap.interfaces import ActionSpace, Box, LatentSample, LatentSpace, MultiDiscrete
 from mocap.observations import imitation_goal_dim, proprioception_dim
 from mocap.rl.networks import ACTIVATIONS, mlp
@@ -596,7 +596,7 @@ def _extract_state(data: dict[str, Any], path: Path) -> tuple[dict[str, Any], di
             return value, config
     if data and all(isinstance(k, str) for k in data) and any(isinstance(v, Tensor) for v in data.values()):
         return data, config
-    raise ValueError(f"{path}: no latent state_dict found (keys: {sorted(data)[:10]})")
+    raise CheckpointError(f"{path}: no latent state_dict found (keys: {sorted(data)[:10]})")
 
 
 def check_compatible(params: HybridParams, config: dict[str, Any], dims: tuple[int, int, int], path: Path | str = "") -> None:
@@ -611,7 +611,7 @@ def check_compatible(params: HybridParams, config: dict[str, Any], dims: tuple[i
         if int(config[name]) != value:
             problems.append(f"{name}: spec {value}, checkpoint {config[name]}")
     if problems:
-        raise ValueError(f"{path}: checkpoint does not match the latent spec: " + "; ".join(problems))
+        raise CheckpointError(f"{path}: checkpoint does not match the latent spec: " + "; ".join(problems))
 
 
 def load_hybrid(path: Path | str, map_location: str | torch.device = "cpu", params: HybridParams | None = None) -> HybridLatent:
@@ -621,7 +621,7 @@ def load_hybrid(path: Path | str, map_location: str | torch.device = "cpu", para
     data = load_checkpoint(Path(path), map_location=map_location)
     state, config = _extract_state(data, Path(path))
     if config is None:
-        raise ValueError(f"{path}: the checkpoint stores no latent config; build with make_hybrid(params, skeleton=..., checkpoint=...)")
+        raise CheckpointError(f"{path}: the checkpoint stores no latent config; build with make_hybrid(params, skeleton=..., checkpoint=...)")
     model = HybridLatent.from_config(config)
     if params is not None:
         check_compatible(params, config, (model.proprio_dim, model.goal_dim, model.action_dim), path)
@@ -654,8 +654,17 @@ def make_hybrid(params: HybridParams, *, skeleton: Skeleton, checkpoint: Path | 
         data = load_checkpoint(Path(checkpoint), map_location="cpu")
         state, config = _extract_state(data, Path(checkpoint))
         if config is not None:
-            check_compatible(params, config, dims, checkpoint)
-        model.load_state_dict(state)
+            try:
+                check_compatible(params, config, dims, checkpoint)
+            except CheckpointError as exc:
+                trained = embedded_humanoid(data)
+                if trained in (None, skeleton.name):
+                    raise
+                raise CheckpointError(f"{exc}; it was trained for humanoid {trained}, the spec asks for {skeleton.name}") from None
+        try:
+            model.load_state_dict(state)
+        except RuntimeError as exc:
+            raise CheckpointError(f"{checkpoint}: not the weights of this hybrid latent ({exc})") from None
         model.eval()
     return model.to(device)
 

@@ -16,6 +16,19 @@ fixed exploration σ is :attr:`PulseParams.task_sigma` (0.22). PD targets come f
 mapping, which the latent does not own: :meth:`PulseLatent.decoder` needs an imitator attached
 with :meth:`PulseLatent.attach_imitator` (:class:`mocap.latent_imitator.LatentImitator` does it).
 
+Ablations (Table 3) and App. C.3 variants, all switches of :class:`PulseParams`:
+
+* ``prior``: learned R(z | s^p) or N(0, I) (rows 1, 2); ``task_action``: residual z = μ^p + z^task
+  or absolute (rows 1, 2, 5); ``regu``: L_regu on/off (rows 1, 3);
+* ``rl_term``: a PPO term on the imitation reward added to distillation (row 4;
+  :mod:`mocap_pulse.rl_term`, driven by the distill trainer through :meth:`PulseLatent.rl_hook`);
+* ``latent_kind``: ``gaussian``; ``sphere`` (z = x / ‖x‖ of the Gaussian sample x, KL on the
+  un-projected Gaussians, prior samples projected: uniform on the sphere with prior 'standard');
+  ``vq`` (:mod:`mocap_pulse.vq`: deterministic encoder, partitioned straight-through quantization with
+  the hybrid plugin's EMA quantizer, commitment loss; prior 'learned' = a categorical code prior
+  R(k | s^p) trained on the encoder's codes, 'standard' = uniform codes; tasks pick one code per
+  partition; random generation samples codes from the prior, with temperature ``noise_scale``).
+
 Provenance tags in the parameter descriptions: [P] paper, [CODE] official code (reference only),
 [INF] inference, [CPU] a small default for 2-core CPU runs.
 """
@@ -24,13 +37,13 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any, Callable, Literal
+from typing import TYPE_CHECKING, Any, Callable, Literal
 
 import torch
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 from torch import Tensor, nn
 
-from mocap.interfaces import Box, Imitator, LatentSample, LatentSpace
+from mocap.interfaces import ActionSpace, Box, Imitator, LatentSample, LatentSpace, MultiDiscrete
 from mocap.observations import imitation_goal_dim, proprioception_dim
 from mocap.rl.networks import ACTIVATIONS, mlp
 from mocap.rl.normalizer import RunningNormalizer
@@ -45,6 +58,10 @@ from mocap_pulse.losses import (
     standard_normal_kl,
     temporal_regularizer,
 )
+from mocap_pulse.rl_term import RL_KEYS, rl_losses
+
+if TYPE_CHECKING:  # pragma: no cover
+    from mocap_pulse.vq import PartitionedVQ
 
 LATENT_FORMAT = "mocap_pulse/1"
 
@@ -64,6 +81,11 @@ ARCHITECTURE_KEYS = (
     "obs_clip",
     "prior",
     "latent_kind",
+    "vq_partitions",
+    "vq_codebook_size",
+    "vq_shared_codebook",
+    "rl_term",
+    "rl_critic_hidden",
 )
 
 
@@ -72,6 +94,11 @@ class PulseParams(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
+    name: str | None = Field(
+        None,
+        description="optional label of this configuration (e.g. a Table 3 row); a comparison spec's matrix names its cells "
+        "by it (specs/latent/pulse_ablations.yaml). No effect on the model",
+    )
     # ------------------------------------------------------------------------------ sizes
     latent_dim: int = Field(32, ge=1, description="latent size Z ([P] 32, about half of SMPL's 69 DoF)")
     goal_obs: Literal["rot", "keypoint"] = Field(
@@ -133,14 +160,50 @@ class PulseParams(BaseModel):
     )
     rl_term: bool = Field(
         False,
-        description="add a PPO term to distillation (Table 3 row 4). NOT BUILT: the distill trainer is purely supervised; "
-        "true is rejected. The paper found it hurts (71.0% vs 93.4% VR success)",
+        description="Table 3 row 4: add a PPO term on the imitation reward to distillation, L + rl_weight L_clip + "
+        "rl_value_coef L_value (mocap_pulse.rl_term; [P] it hurts: 71.0% vs 93.4% VR success; formula [INF]). Needs "
+        "act_with: student in the distill trainer",
+    )
+    rl_weight: float = Field(1.0, ge=0, description="rl_term: weight of the policy-gradient term against the distillation loss [INF]")
+    rl_policy: Literal["decoder", "encoder"] = Field(
+        "decoder",
+        description="rl_term: 'decoder' = the decoder as a fixed-σ Gaussian over actions, rollouts sample z and action noise "
+        "([P] wording, kickstarting); 'encoder' = the encoder Gaussian over z is the policy, no action noise",
+    )
+    rl_action_sigma: float = Field(
+        0.05, gt=0, description="rl_term 'decoder': fixed action σ in the teacher's policy-output space ([P] PHC+ σ 0.05; [CODE] e^-2.9)"
+    )
+    rl_gamma: float = Field(0.99, ge=0, le=1, description="rl_term: discount γ ([P] PHC+ 0.99)")
+    rl_lambda: float = Field(0.95, ge=0, le=1, description="rl_term: GAE λ ([CODE] 0.95)")
+    rl_clip: float = Field(0.2, gt=0, description="rl_term: PPO clip ε ([P] PHC+ 0.2)")
+    rl_value_coef: float = Field(1.0, ge=0, description="rl_term: weight of the critic's ½(V − R)² loss (only the critic's weights get its gradient; [CODE] PPO critic_coef 5)")
+    rl_normalize_advantages: bool = Field(True, description="rl_term: normalize advantages per minibatch ([CODE] rl_games normalizes)")
+    rl_reward_form: Literal["paper", "code"] = Field(
+        "paper", description="rl_term: the phc imitation reward's error form (mocap_phc.rewards: 'paper' norms, 'code' mean squares)"
+    )
+    rl_critic_hidden: list[int] = Field(
+        default_factory=lambda: [256, 256], min_length=1, description="rl_term: critic MLP hidden sizes on [s^p | s^g] ([CPU])"
     )
     latent_kind: Literal["gaussian", "sphere", "vq"] = Field(
         "gaussian",
-        description="'gaussian' ([P]); 'sphere' (App. C.3: z projected to the unit sphere after sampling, KL on the un-projected "
-        "Gaussians [INF from the code's project_to_norm]); 'vq' (App. C.3: 64-d, 8 partitions, 64 codes): NOT BUILT, rejected "
-        "(see the hybrid_rvq latent for a quantized space)",
+        description="'gaussian' ([P]); 'sphere' (App. C.3, like ASE: z = x / ‖x‖ of the Gaussian sample x; the KL stays on the "
+        "un-projected Gaussians [INF], the prior's samples are projected too: a projected Gaussian on the sphere, uniform for "
+        "prior 'standard'); 'vq' (App. C.3: deterministic encoder output split into vq_partitions parts, each replaced by its "
+        "nearest code, straight-through, commitment loss; [P] 64-d, 8 partitions, 64 codes; set latent_dim: 64)",
+    )
+    vq_partitions: int = Field(8, ge=1, description="vq: partitions G of z, each quantized on its own ([P] 8; latent_dim must be a multiple)")
+    vq_codebook_size: int = Field(64, ge=2, description="vq: codes K per dictionary ([P] 64)")
+    vq_shared_codebook: bool = Field(
+        True, description="vq: one dictionary shared by all partitions (Liu et al. 2021, [INF] for PULSE) or one per partition"
+    )
+    vq_commit_weight: float = Field(0.25, ge=0, description="vq: weight of the commitment loss (VQ-VAE's β = 0.25; [P] not given)")
+    vq_decay: float = Field(0.99, gt=0, le=1, description="vq: EMA decay of the codebooks (VQ-VAE-EMA; 1 freezes them)")
+    vq_dead_threshold: float = Field(2.0, ge=0, description="vq: codes whose EMA usage falls below this are reset from the batch (0: off)")
+    vq_prior_weight: float = Field(
+        1.0,
+        ge=0,
+        description="vq with prior 'learned': weight of the categorical prior's loss −log R(k | s^p) (= KL of the one-hot "
+        "posterior to the prior); the gradient reaches only the prior",
     )
     # ----------------------------------------------------------------------------- downstream
     task_sigma: float = Field(
@@ -152,16 +215,10 @@ class PulseParams(BaseModel):
 
     @model_validator(mode="after")
     def _check(self) -> "PulseParams":
-        if self.rl_term:
-            raise ValueError(
-                "rl_term: an RL (PPO) term added to distillation (PULSE Table 3 row 4) is not built in this project; "
-                "the distill trainer is purely supervised. Set rl_term: false"
-            )
-        if self.latent_kind == "vq":
-            raise ValueError(
-                "latent_kind: 'vq' (PULSE App. C.3 vector-quantized variant) is not built in the pulse plugin; "
-                "use 'gaussian' or 'sphere', or the hybrid_rvq latent space for a quantized latent"
-            )
+        if self.latent_kind == "vq" and self.latent_dim % self.vq_partitions:
+            raise ValueError(f"latent_kind 'vq': latent_dim ({self.latent_dim}) must be a multiple of vq_partitions ({self.vq_partitions})")
+        if self.rl_term and self.rl_policy == "encoder" and self.latent_kind == "vq":
+            raise ValueError("rl_policy 'encoder' needs a stochastic encoder; the vq encoder is deterministic: use rl_policy 'decoder'")
         a, b = self.beta_anneal
         if not (0.0 <= a < b <= 1.0):
             raise ValueError(f"beta_anneal must satisfy 0 <= start < end <= 1 (progress fractions), got {self.beta_anneal}")
@@ -211,11 +268,28 @@ class PulseLatent(LatentSpace):
         bounds = (float(p.logvar_min), float(p.logvar_max))
         if p.activation not in ACTIVATIONS:  # pragma: no cover - pydantic already checks
             raise ValueError(p.activation)
-        self.proprio_norm = RunningNormalizer((self.proprio_dim,), clip=p.obs_clip)
-        self.goal_norm = RunningNormalizer((self.goal_dim,), clip=p.obs_clip)
-        self.enc = GaussianMLP(self.proprio_dim + self.goal_dim, list(p.encoder_hidden), Z, p.activation, bounds)
-        self.pri = GaussianMLP(self.proprio_dim, list(p.prior_hidden), Z, p.activation, bounds) if p.prior == "learned" else None
-        self.dec = mlp([self.proprio_dim + Z, *p.decoder_hidden, self.action_dim], p.activation)
+        P, G = self.proprio_dim, self.goal_dim
+        self.proprio_norm = RunningNormalizer((P,), clip=p.obs_clip)
+        self.goal_norm = RunningNormalizer((G,), clip=p.obs_clip)
+        self.vq: PartitionedVQ | None = None
+        self.code_prior: nn.Module | None = None
+        self.pri: GaussianMLP | None = None
+        if p.latent_kind == "vq":
+            # deterministic encoder output, quantized; a categorical prior over the codes (or uniform).
+            # Imported here: only this variant needs the hybrid_rvq plugin's quantizer.
+            from mocap_pulse.vq import PartitionedVQ
+
+            self.enc: nn.Module = mlp([P + G, *p.encoder_hidden, Z], p.activation)
+            self.vq = PartitionedVQ(
+                Z, p.vq_partitions, p.vq_codebook_size, shared=p.vq_shared_codebook, decay=p.vq_decay, dead_threshold=p.vq_dead_threshold
+            )
+            if p.prior == "learned":
+                self.code_prior = mlp([P, *p.prior_hidden, p.vq_partitions * p.vq_codebook_size], p.activation)
+        else:
+            self.enc = GaussianMLP(P + G, list(p.encoder_hidden), Z, p.activation, bounds)
+            self.pri = GaussianMLP(P, list(p.prior_hidden), Z, p.activation, bounds) if p.prior == "learned" else None
+        self.dec = mlp([P + Z, *p.decoder_hidden, self.action_dim], p.activation)
+        self.critic = mlp([P + G, *p.rl_critic_hidden, 1], p.activation) if p.rl_term else None
         self._pd_map: Callable[[Observations, Tensor], Tensor] | None = None
 
     # ------------------------------------------------------------------------- bookkeeping
@@ -290,10 +364,14 @@ class PulseLatent(LatentSpace):
             g = None if g is None else self.goal_norm.normalize(g)
         return p, g, lead
 
-    def _posterior(self, p: Tensor, g: Tensor | None) -> tuple[Tensor, Tensor]:
+    def _posterior(self, p: Tensor, g: Tensor | None) -> tuple[Tensor, Tensor | None]:
+        """Encoder mean and log-variance (``None`` for the deterministic vq encoder)."""
         if g is None:
             raise ValueError("the pulse encoder needs the imitation goal (obs.goal)")
-        return self.enc(torch.cat((p, g), -1))
+        x = torch.cat((p, g), -1)
+        if self.vq is not None:
+            return self.enc(x), None
+        return self.enc(x)
 
     def _prior(self, p: Tensor) -> tuple[Tensor, Tensor]:
         if self.pri is None:
@@ -301,25 +379,68 @@ class PulseLatent(LatentSpace):
             return z, z.clone()
         return self.pri(p)
 
+    def _code_logits(self, p: Tensor) -> Tensor:
+        """(M, G, K) logits of the learned categorical code prior R(k_g | s^p) (vq, prior 'learned')."""
+        assert self.code_prior is not None and self.vq is not None
+        return self.code_prior(p).reshape(p.shape[0], self.vq.partitions, self.vq.codebook_size)
+
     def _project(self, z: Tensor) -> Tensor:
         return project_to_sphere(z) if self.params.latent_kind == "sphere" else z
+
+    def _to_decoder_latent(self, z: Tensor, train: bool = False) -> Tensor:
+        """What the decoder receives for an encoder-side latent ``z``: ``z`` ('gaussian'), ``z / ‖z‖``
+        ('sphere') or its straight-through quantization ('vq'; ``train`` updates the codebooks)."""
+        if self.vq is not None:
+            return self.vq(z, train=train).quantized
+        return self._project(z)
 
     def _decode(self, p: Tensor, z: Tensor) -> Tensor:
         return self.dec(torch.cat((p, z), -1))
 
+    def value(self, p: Tensor, g: Tensor | None) -> Tensor:
+        """(M,) the RL term's critic V([s^p | s^g]) on normalized inputs (``rl_term`` only)."""
+        if self.critic is None or g is None:
+            raise RuntimeError("the pulse critic exists only with rl_term: true and needs the imitation goal")
+        return self.critic(torch.cat((p, g), -1)).squeeze(-1)
+
+    def rl_hook(self) -> Any:
+        """The distill trainer's optional RL hook (:class:`mocap_pulse.rl_term.PulseRLHook`) when
+        ``rl_term`` is on, else ``None`` (pure supervised distillation)."""
+        if not self.params.rl_term:
+            return None
+        from mocap_pulse.rl_term import PulseRLHook
+
+        return PulseRLHook(self)
+
     # -------------------------------------------------------------------------- LatentSpace
     def encoder(self, obs: Observations, sample: bool = False) -> LatentSample:
         """E(z | s^p, s^g): mean μ^e, std σ^e and ``z`` (a reparameterized sample with ``sample``, else μ^e;
-        projected to the unit sphere for ``latent_kind='sphere'``)."""
+        projected to the unit sphere for 'sphere'). 'vq': ``std`` None, ``z`` the codes of μ^e and
+        ``indices`` (N, G) their indices."""
         p, g, lead = self._inputs(obs)
         mu, logvar = self._posterior(p, g)
+        if self.vq is not None:
+            q = self.vq(mu, train=False)
+            return LatentSample(mean=mu.reshape(*lead, -1), z=q.quantized.reshape(*lead, -1), indices=q.indices.reshape(*lead, -1))
+        assert logvar is not None
         z = self._project(reparameterize(mu, logvar) if sample else mu)
         std = torch.exp(0.5 * logvar)
         return LatentSample(mean=mu.reshape(*lead, -1), std=std.reshape(*lead, -1), z=z.reshape(*lead, -1))
 
     def prior(self, obs: Observations) -> LatentSample:
-        """R(z | s^p) (or N(0, I)): mean μ^p, std σ^p, ``z`` = μ^p (projected for 'sphere')."""
+        """R(z | s^p) (or N(0, I)): mean μ^p, std σ^p, ``z`` = μ^p (projected for 'sphere').
+
+        'vq': the most likely code of each partition under the learned categorical prior (``mean`` =
+        ``z`` = those codes, ``indices`` them, ``std`` None); with prior 'standard' (uniform codes)
+        ``mean`` = ``z`` = 0 and no indices."""
         p, _, lead = self._inputs(Observations(proprio=obs.proprio))
+        if self.vq is not None:
+            if self.code_prior is None:
+                z = p.new_zeros(p.shape[0], self.latent_dim)
+                return LatentSample(mean=z.reshape(*lead, -1), z=z.reshape(*lead, -1))
+            idx = self._code_logits(p).argmax(-1)
+            z = self.vq.decode(idx).to(p)
+            return LatentSample(mean=z.reshape(*lead, -1), z=z.reshape(*lead, -1), indices=idx.reshape(*lead, -1))
         mu, logvar = self._prior(p)
         return LatentSample(mean=mu.reshape(*lead, -1), std=torch.exp(0.5 * logvar).reshape(*lead, -1), z=self._project(mu).reshape(*lead, -1))
 
@@ -338,23 +459,49 @@ class PulseLatent(LatentSpace):
         return self._pd_map(obs, self.decode_action(obs, z))
 
     @property
-    def task_action_space(self) -> Box:
-        """A continuous Z-d residual (Eq. 4), unbounded; explore with σ = :attr:`PulseParams.task_sigma`."""
+    def task_action_space(self) -> ActionSpace:
+        """A continuous Z-d residual (Eq. 4), unbounded; explore with σ = :attr:`PulseParams.task_sigma`.
+        'vq': one code index per partition (``MultiDiscrete((K,) * G)``, NCP-style; ``task_action`` unused)."""
+        if self.vq is not None:
+            return MultiDiscrete((self.vq.codebook_size,) * self.vq.partitions)
         return Box((self.latent_dim,))
 
     def to_latent(self, obs: Observations, task_action: Tensor) -> Tensor:
         """Eq. 4: ``z = μ^p(s^p) + z^task`` ('residual'), or ``z = z^task`` ('absolute'); sphere-projected
-        for 'sphere'. Linear in ``z^task`` before the projection."""
+        for 'sphere'. Linear in ``z^task`` before the projection. 'vq': the codes of the (N, G) indices."""
+        if self.vq is not None:
+            idx = task_action.to(self.device).long().reshape(-1, self.vq.partitions)
+            return self.vq.decode(idx).to(torch.float32).reshape(*task_action.shape[:-1], self.latent_dim)
         r = task_action.to(self.device, torch.float32)
         if self.params.task_action == "residual":
             r = self.prior(obs).mean.reshape(r.shape) + r
         return self._project(r)
 
     def sample_prior(self, obs: Observations, noise_scale: float = 1.0, generator: torch.Generator | None = None) -> Tensor:
-        """Random generation: ``z = μ^p + noise_scale · σ^p · ε`` (N(0, I) prior: ``noise_scale · ε``).
+        """Random generation: ``z = μ^p + noise_scale · σ^p · ε`` (N(0, I) prior: ``noise_scale · ε``),
+        projected for 'sphere' (uniform on the sphere with the N(0, I) prior).
+
+        'vq': per partition a code index drawn from the learned categorical prior with temperature
+        ``noise_scale`` (softmax(logits / noise_scale); 0 = the most likely code), or uniformly over
+        the K codes with prior 'standard' (``noise_scale`` unused). The paper (App. C.3) found random
+        VQ samples incoherent, with code-switching jitter.
 
         The paper: varying the noise biases generation toward smoother (less) or more energetic (more) motion.
         """
+        if self.vq is not None:
+            p, _, lead = self._inputs(Observations(proprio=obs.proprio))
+            dev = p.device if generator is None else generator.device
+            M, Gp, K = p.shape[0], self.vq.partitions, self.vq.codebook_size
+            if self.code_prior is None:
+                idx = torch.randint(0, K, (M, Gp), generator=generator, device=dev)
+            else:
+                logits = self._code_logits(p)
+                if noise_scale <= 0:
+                    idx = logits.argmax(-1)
+                else:
+                    probs = torch.softmax(logits / noise_scale, -1).reshape(M * Gp, K).to(dev)
+                    idx = torch.multinomial(probs, 1, generator=generator).reshape(M, Gp)
+            return self.vq.decode(idx.to(p.device)).to(p).reshape(*lead, self.latent_dim)
         prior = self.prior(obs)
         assert prior.std is not None
         eps = torch.randn(prior.mean.shape, generator=generator, device=prior.mean.device if generator is None else generator.device)
@@ -366,48 +513,86 @@ class PulseLatent(LatentSpace):
 
     # ------------------------------------------------------------------------ distillation
     def student_action(self, obs: Observations, sample: bool = True) -> Tensor:
-        """(N, A) ``D(s^p, z)`` with ``z`` sampled from E (``sample``) or ``z = μ^e``."""
+        """(N, A) ``D(s^p, z)`` with ``z`` sampled from E (``sample``) or ``z = μ^e`` ('vq': the codes of
+        μ^e either way; never updates the codebooks)."""
         p, g, lead = self._inputs(obs)
         mu, logvar = self._posterior(p, g)
-        z = self._project(reparameterize(mu, logvar) if sample else mu)
-        return self._decode(p, z).reshape(*lead, -1)
+        z = mu if (logvar is None or not sample) else reparameterize(mu, logvar)
+        return self._decode(p, self._to_decoder_latent(z, train=False)).reshape(*lead, -1)
 
     def distill_losses(self, obs: Observations, teacher_output: Tensor, starts: Tensor, progress: float) -> dict[str, Tensor]:
-        """Eq. 3 on a (T, N) chunk: ``L = L_action + α L_regu + β(progress) L_KL``.
+        """Eq. 3 on a (T, N) chunk: ``L = L_action + α L_regu + β(progress) L_KL`` and the variants' terms.
+
+        * 'vq': no Gaussian KL; ``+ vq_commit_weight · L_commit`` and, with the learned code prior,
+          ``+ vq_prior_weight · (−log R(k | s^p))`` (logged as ``kl``: the KL of the one-hot posterior
+          to the categorical prior; it trains only the prior). In training mode the codebooks take
+          an EMA step.
+        * ``rl_term``: ``+ rl_weight · L_clip + rl_value_coef · L_value`` from the rollout tensors
+          in ``obs.extra`` (:mod:`mocap_pulse.rl_term`); without them (e.g. a caller without the
+          hook) the term is skipped.
 
         Returns ``loss`` and its terms ``action``, ``regu``, ``kl`` (batch means), ``beta`` and
-        diagnostics (``sigma_e``, ``sigma_p``: mean standard deviations; ``mu_e_norm``).
+        diagnostics (``sigma_e``, ``sigma_p``: mean standard deviations; ``mu_e_norm``), plus
+        ``commit``, ``perplexity`` ('vq') and ``rl_policy``, ``rl_value``, ``rl_ratio`` (``rl_term``).
         """
         pp = self.params
         T, N = starts.shape
         p, g, _ = self._inputs(obs)
         mu_e, logvar_e = self._posterior(p, g)
-        z = self._project(reparameterize(mu_e, logvar_e))
-        a = self._decode(p, z)
+        out: dict[str, Tensor] = {}
+        extra_loss = p.new_zeros(())
+        if self.vq is not None:
+            q = self.vq(mu_e, train=self.training)
+            a = self._decode(p, q.quantized)
+            out["commit"] = q.commit.detach()
+            extra_loss = extra_loss + pp.vq_commit_weight * q.commit
+            if self.code_prior is not None:
+                logits = self._code_logits(p)
+                kl = torch.nn.functional.cross_entropy(logits.reshape(-1, self.vq.codebook_size), q.indices.reshape(-1), reduction="none")
+                kl = kl.reshape(p.shape[0], -1).sum(-1).mean()
+                extra_loss = extra_loss + pp.vq_prior_weight * kl
+            else:
+                kl = p.new_zeros(())
+            counts = torch.bincount(q.indices.reshape(-1), minlength=self.vq.codebook_size).to(p)
+            probs = counts / counts.sum().clamp_min(1.0)
+            out["perplexity"] = torch.exp(-(probs * torch.log(probs.clamp_min(1e-12))).sum()).detach()
+            sigma_e = p.new_zeros(())
+            sigma_p = p.new_zeros(())
+            beta = 0.0
+        else:
+            assert logvar_e is not None
+            z = self._project(reparameterize(mu_e, logvar_e))
+            a = self._decode(p, z)
+            if self.pri is None:
+                kl = standard_normal_kl(mu_e, logvar_e).mean()
+                sigma_p = torch.ones((), device=a.device)
+            else:
+                mu_p, logvar_p = self._prior(p)
+                kl = gaussian_kl(mu_e, logvar_e, mu_p, logvar_p).mean()
+                sigma_p = torch.exp(0.5 * logvar_p).mean()
+            sigma_e = torch.exp(0.5 * logvar_e).mean()
+            beta = beta_schedule(progress, pp.beta_start, pp.beta_end, pp.beta_anneal)
         target = teacher_output.reshape(-1, self.action_dim).to(a)
         l_action = action_loss(a, target, pp.action_loss)
-        if self.pri is None:
-            kl = standard_normal_kl(mu_e, logvar_e).mean()
-            sigma_p = torch.ones((), device=a.device)
-        else:
-            mu_p, logvar_p = self._prior(p)
-            kl = gaussian_kl(mu_e, logvar_e, mu_p, logvar_p).mean()
-            sigma_p = torch.exp(0.5 * logvar_p).mean()
         if pp.regu and pp.alpha > 0:
             regu = temporal_regularizer(mu_e.reshape(T, N, -1), starts.to(a.device), pp.regu_form, pp.regu_phi)
         else:
             regu = a.new_zeros(())
-        beta = beta_schedule(progress, pp.beta_start, pp.beta_end, pp.beta_anneal)
-        loss = l_action + (pp.alpha if pp.regu else 0.0) * regu + beta * kl
+        if pp.rl_term and all(k in obs.extra for k in RL_KEYS):
+            rl = rl_losses(self, p, g, mu_e, logvar_e, obs.extra)  # type: ignore[arg-type]
+            extra_loss = extra_loss + pp.rl_weight * rl["rl_policy"] + pp.rl_value_coef * rl["rl_value"]
+            out.update({k: v.detach() for k, v in rl.items()})
+        loss = l_action + (pp.alpha if pp.regu else 0.0) * regu + beta * kl + extra_loss
         return {
             "loss": loss,
             "action": l_action.detach(),
             "regu": regu.detach(),
             "kl": kl.detach(),
             "beta": torch.tensor(beta),
-            "sigma_e": torch.exp(0.5 * logvar_e).mean().detach(),
+            "sigma_e": sigma_e.detach(),
             "sigma_p": sigma_p.detach(),
             "mu_e_norm": mu_e.norm(dim=-1).mean().detach(),
+            **out,
         }
 
 
@@ -434,18 +619,26 @@ def make_pulse(
     params = params or PulseParams()
     latent = PulseLatent(params, *pulse_dims(params, skeleton))
     if checkpoint is not None:
+        from mocap.checkpoint import CheckpointError, embedded_humanoid
         from mocap.distill import load_latent_state
 
-        saved = load_latent_state(Path(checkpoint))
+        try:
+            saved = load_latent_state(Path(checkpoint))
+        except CheckpointError:
+            raise
+        except ValueError as exc:  # another kind of file: a user error, not a bug
+            raise CheckpointError(str(exc)) from None
         config = saved.get("config") or {}
         diff = [k for k in ARCHITECTURE_KEYS if k in config and _jsonable(config[k]) != _jsonable(latent.config[k])]
         if diff:
             detail = ", ".join(f"{k}: checkpoint {config[k]!r} vs spec {latent.config[k]!r}" for k in diff)
-            raise ValueError(f"{checkpoint}: the saved pulse latent does not match the spec ({detail})")
+            trained = embedded_humanoid(saved)
+            where = f"; it was trained for humanoid {trained}, the spec asks for {skeleton.name}" if trained not in (None, skeleton.name) else ""
+            raise CheckpointError(f"{checkpoint}: the saved pulse latent does not match the spec ({detail}){where}")
         try:
             latent.load_state_dict(saved["state_dict"])
         except RuntimeError as exc:
-            raise ValueError(f"{checkpoint}: not the weights of this pulse latent ({exc})") from None
+            raise CheckpointError(f"{checkpoint}: not the weights of this pulse latent ({exc})") from None
         latent.eval()
     return latent.to(device)
 

@@ -96,8 +96,15 @@ def beta_schedule(progress: float, start: float = 0.01, end: float = 0.001, wind
 
 
 def project_to_sphere(z: Tensor, eps: float = 1e-8) -> Tensor:
-    """``z / ‖z‖`` over the last dim (the App. C.3 spherical-latent variant, like ASE/CALM)."""
-    return z / z.norm(dim=-1, keepdim=True).clamp_min(eps)
+    """``z / ‖z‖`` over the last dim (the App. C.3 spherical-latent variant, like ASE/CALM).
+
+    A vector of norm below ``eps`` has no direction (e.g. the N(0, I) prior's mean, or a zero
+    residual on it); it maps to the first basis vector ``e_1``, so every output is on the sphere.
+    """
+    norm = z.norm(dim=-1, keepdim=True)
+    e1 = torch.zeros_like(z)
+    e1[..., 0] = 1.0
+    return torch.where(norm > eps, z / norm.clamp_min(eps), e1)
 
 
 __all__ = [

@@ -3,11 +3,16 @@
 :class:`VmpLatent` holds the VAE and the feature standardization statistics (buffers, saved with
 the weights). Its :meth:`~VmpLatent.encoder` reads ``obs.extra["window"]``: (N, 2W+1, F)
 heading-normalized, **unstandardized** features as :meth:`~VmpLatent.windows` computes them from a
-motion library; it standardizes them itself. The decoder of the LatentSpace interface (PD targets
-from proprioception and z) is VMP's stage II tracking policy, which also needs the reference frame
-m_t, so it is not this method (calling it raises :class:`NotImplementedError`) but
-:class:`mocap_vmp.tracking.VmpImitator`, trained by the ``vmp_track`` trainer. The VAE's own window
-decoder is :meth:`~VmpLatent.decode_window`.
+motion library; it standardizes them itself. The VAE's own window decoder is
+:meth:`~VmpLatent.decode_window`.
+
+The decoder of the LatentSpace interface (PD targets from proprioception and z) exists for a latent
+loaded with a tracking policy (a ``vmp_track`` ``vmp.pt``): ``z`` is decoded into a window whose
+centre frame, with ``z``, conditions the frozen tracker (:mod:`mocap_vmp.task`; this hierarchical
+use goes beyond the paper, where VMP only tracks references). The task action is ``z`` itself
+(``task_action: latent``, default) or a residual around the current window's encoding
+(``task_action: residual``); :meth:`~VmpLatent.random_action` samples z ~ N(0, I). For imitation the
+tracker is :class:`mocap_vmp.tracking.VmpImitator`.
 """
 
 from __future__ import annotations
@@ -65,6 +70,14 @@ class VmpParams(BaseModel):
     latent_for_policy: Literal["mean", "sample"] = Field(
         "mean", description="z_t given to the policy and precomputed per frame: posterior mean or a sample [X: paper silent]"
     )
+    task_action: Literal["latent", "residual"] = Field(
+        "latent",
+        description="a task policy's action (beyond the paper: VMP only tracks): 'latent' = z itself (prior N(0, I)); "
+        "'residual' = z = the encoding of the current frame held over the window + a (mocap_vmp.task) [X]",
+    )
+    task_action_clip: float | None = Field(
+        None, gt=0, description="bound of the task action space Box(d_z): actions clamped to [-clip, clip]; None = unbounded [X]"
+    )
 
 
 class VmpLatent(LatentSpace):
@@ -89,6 +102,7 @@ class VmpLatent(LatentSpace):
         #: the vmp_track trainer's tracking policy entry of a combined vmp.pt (None for stage-1-only files)
         self.tracker: dict[str, Any] | None = None
         self.checkpoint_path: Path | None = None
+        self._decoder_cache: Any = None
 
     def as_imitator(self, library: Any, dt: float | None = None, device: Any = "cpu") -> Any:
         """The trained tracking policy (stage 2) as an Imitator over ``library`` (``mocap eval`` uses
@@ -140,10 +154,8 @@ class VmpLatent(LatentSpace):
         return LatentSample(mean=mu, std=std, z=z)
 
     def decoder(self, obs: Observations, z: Tensor) -> Tensor:
-        raise NotImplementedError(
-            "vmp: the decoder to PD targets is VMP's stage II tracking policy, which also needs the reference frame m_t: "
-            "train it with the vmp_track trainer and build it with mocap_vmp.tracking.vmp_imitator"
-        )
+        """(N, D) PD targets from proprioception and ``z`` through the loaded tracking policy (:meth:`decode_action`)."""
+        return self.decode_action(obs, z)
 
     def prior(self, obs: Observations) -> LatentSample:
         """N(0, I), independent of the state."""
@@ -153,12 +165,75 @@ class VmpLatent(LatentSpace):
 
     @property
     def task_action_space(self) -> Box:
-        """A task policy acts directly in the latent space: Box(d_z), unbounded."""
-        return Box((self.latent_dim,))
+        """A task policy acts in the latent space: Box(d_z), unbounded or +-``task_action_clip``
+        (``z`` itself, or the residual around the current encoding; :mod:`mocap_vmp.task`)."""
+        c = self.params.task_action_clip
+        return Box((self.latent_dim,)) if c is None else Box((self.latent_dim,), -float(c), float(c))
 
     def to_latent(self, obs: Observations, task_action: Tensor) -> Tensor:
-        """The task action *is* z (absolute latent, no residual over the prior)."""
-        return task_action
+        """``z = a`` (``task_action: latent``) or ``z = current_latent(obs) + a`` (``residual``)."""
+        a = task_action.float().to(self.feat_mean.device)
+        c = self.params.task_action_clip
+        if c is not None:
+            a = a.clamp(-c, c)
+        if self.params.task_action == "residual":
+            return self.current_latent(obs) + a
+        return a
+
+    @torch.no_grad()
+    def current_latent(self, obs: Observations) -> Tensor:
+        """(N, d_z) the posterior mean of the current window: the simulated frame reconstructed from
+        ``obs.proprio`` (:func:`mocap_vmp.task.features_from_proprio`) repeated 2W+1 times."""
+        from mocap_vmp.task import features_from_proprio
+
+        feat = features_from_proprio(obs.proprio.to(self.feat_mean), self.skeleton, self.ee_index).to(self.feat_mean)
+        window = feat[:, None, :].expand(-1, self.window, -1)
+        mu, _ = self.vae.encode(self.standardize(window))
+        return mu
+
+    @property
+    def decodes_pd_targets(self) -> bool:
+        """True when a tracking policy is loaded: :meth:`decoder` / :meth:`decode_action` return PD targets."""
+        return self.tracker is not None
+
+    def _tracker_decoder(self) -> Any:
+        if self.tracker is None:
+            raise NotImplementedError(
+                "vmp: decoding z to PD targets needs VMP's stage II tracking policy: load a vmp.pt of the vmp_track trainer "
+                "(a stage-1-only VAE decodes only windows: decode_window)"
+            )
+        if getattr(self, "_decoder_cache", None) is None:
+            from mocap_vmp.task import TrackerDecoder
+
+            self._decoder_cache = TrackerDecoder(self, self.tracker)
+        return self._decoder_cache
+
+    def decode_action(self, obs: Observations, z: Tensor) -> Tensor:
+        """(N, D) PD targets: the frozen tracker conditioned on the centre frame of ``decode_window(z)`` and ``z``."""
+        return self._tracker_decoder()(obs.proprio, z)
+
+    def random_action(self, obs: Observations, noise_scale: float = 1.0, generator: torch.Generator | None = None) -> Tensor:
+        """PD targets of a random step: ``z ~ N(0, noise_scale^2 I)`` (the VAE prior) decoded by :meth:`decode_action`."""
+        n = obs.proprio.shape[0]
+        eps = torch.randn(n, self.latent_dim, generator=generator, device="cpu" if generator is None else generator.device)
+        return self.decode_action(obs, noise_scale * eps.to(self.feat_mean))
+
+    def reset_envs(self, env_ids: Tensor) -> None:
+        """Envs ``env_ids`` were reset: their tracker action history restarts (hold the current pose)."""
+        if self.tracker is not None:
+            self._tracker_decoder().reset_envs(env_ids)
+
+    def task_state_dict(self) -> dict[str, Any]:
+        """The per-env tracker action history (for an exact resume of a task env)."""
+        dec = self._decoder_cache
+        if dec is None or dec.hist is None:
+            return {}
+        return {"hist": dec.hist.clone(), "fresh": dec._fresh.clone()}
+
+    def load_task_state_dict(self, state: dict[str, Any]) -> None:
+        if state:
+            dec = self._tracker_decoder()
+            dec.hist, dec._fresh = state["hist"].clone(), state["fresh"].clone()
 
     # ---------------------------------------------------------------------------- the VAE
     def decode_window(self, z: Tensor) -> Tensor:
@@ -195,21 +270,23 @@ def make_vmp(
     params = params or VmpParams()
     latent = VmpLatent(params, skeleton)
     if checkpoint is not None:
-        from mocap.checkpoint import load_checkpoint
+        from mocap.checkpoint import CheckpointError, embedded_humanoid, load_checkpoint
 
         saved = load_checkpoint(Path(checkpoint))
         state = saved.get("latent")
         if state is None:
-            raise ValueError(f"{checkpoint}: not a vmp checkpoint (no 'latent' entry)")
+            raise CheckpointError(f"{checkpoint}: not a vmp checkpoint (no 'latent' entry; format {saved.get('format')!r})")
         config = saved.get("config") or {}
         diff = [k for k in ARCHITECTURE_KEYS if k in config and config[k] != latent.config[k]]
         if diff:
             detail = ", ".join(f"{k}: checkpoint {config[k]!r} vs spec {latent.config[k]!r}" for k in diff)
-            raise ValueError(f"{checkpoint}: the saved vmp latent does not match the spec ({detail})")
+            trained = embedded_humanoid(saved)
+            where = f"; it was trained for humanoid {trained}, the spec asks for {skeleton.name}" if trained not in (None, skeleton.name) else ""
+            raise CheckpointError(f"{checkpoint}: the saved vmp latent does not match the spec ({detail}){where}")
         try:
             latent.load_state_dict(state)
         except RuntimeError as exc:
-            raise ValueError(f"{checkpoint}: not the weights of this vmp latent ({exc})") from None
+            raise CheckpointError(f"{checkpoint}: not the weights of this vmp latent ({exc})") from None
         latent.frame_latents = saved.get("frame_latents")
         latent.clip_names = list(saved.get("clip_names") or [])
         latent.tracker = saved.get("tracker")

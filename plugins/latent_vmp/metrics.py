@@ -1,4 +1,5 @@
-"""VMP's tracking metric: joint MAE in degrees (paper section 5.2).
+"""VMP's metrics: joint MAE in degrees (paper section 5.2) and the latent-space metrics of section 5.4
+(linear separability as LDA accuracy, mutual information between latent and labels).
 
 ``MAE_q = (180 / pi) * mean_{t, j} |q_ref(t, j) - q_sim(t, j)|`` per clip (episode), over the valid
 frames and every DoF (hinge angle) of the skeleton. The imitation protocol records body
@@ -9,6 +10,20 @@ wraps each difference into ``[-pi, pi]`` before taking its absolute value. [D]: 
 joint's gimbal singularity (middle hinge at +-90 deg) the Euler decomposition is ill-conditioned;
 such poses are rare in human motion. :func:`joint_mae_deg_from_dofs` is the plain formula on DoF
 trajectories.
+
+Latent-space metrics (the paper compares VMP's and CALM's latent spaces on motion labels: LDA
+accuracy 0.854 vs 0.687, MI 0.341 vs 0.121; its label set, split and MI estimator are not given,
+digest section 9.5 item 9). Ours, on labels the data provides (the bundled clips: each frame's clip
+name, :func:`latent_label_metrics`):
+
+* :func:`lda_accuracy`: linear discriminant analysis (class means, pooled within-class covariance
+  plus ``ridge`` times its mean eigenvalue on the diagonal, class priors from the training part)
+  fitted on one part and scored on the other, ``folds``-fold cross-validated over a random
+  permutation (``folds = 1``: fitted and scored on everything); the accuracy in [0, 1];
+* :func:`mutual_information`: the mean over latent dimensions of ``I(bin(z_j); y)`` in nats, each
+  dimension cut into ``bins`` equal-count (quantile) bins; :func:`discrete_mutual_information` is
+  the plug-in estimate ``sum p(a, b) log(p(a, b) / (p(a) p(b)))`` of two label arrays
+  (``I(X; X) = H(X)``, ``>= 0``, symmetric).
 """
 
 from __future__ import annotations
@@ -94,12 +109,101 @@ def make_joint_mae(
     return JointMAE(skeleton)
 
 
+# ------------------------------------------------------------------------- latent-space metrics
+def _codes(labels: Tensor) -> tuple[Tensor, int]:
+    """Labels (M,) of any integer values as codes 0..K-1 and K."""
+    uniq, codes = torch.unique(torch.as_tensor(labels).reshape(-1), return_inverse=True)
+    return codes, int(uniq.numel())
+
+
+def lda_fit(x: Tensor, y: Tensor, num_classes: int, ridge: float = 1e-3) -> tuple[Tensor, Tensor]:
+    """(W (d, K), b (K,)): the linear discriminants ``x W + b`` of LDA on ``x`` (M, d), codes ``y`` (M,)."""
+    x = x.double()
+    d = x.shape[1]
+    counts = torch.bincount(y, minlength=num_classes).double()
+    present = counts > 0
+    means = torch.zeros(num_classes, d, dtype=torch.float64).index_add_(0, y, x) / counts.clamp_min(1.0)[:, None]
+    centred = x - means[y]
+    cov = centred.T @ centred / max(1, x.shape[0] - int(present.sum()))
+    cov = cov + ridge * (torch.trace(cov) / d + 1e-12) * torch.eye(d, dtype=torch.float64)
+    W = torch.linalg.solve(cov, means.T)  # (d, K)
+    b = -0.5 * (means * W.T).sum(-1) + torch.log(counts / counts.sum()).where(present, torch.full_like(counts, -math.inf))
+    return W, b
+
+
+def lda_accuracy(x: Tensor, labels: Tensor, folds: int = 5, ridge: float = 1e-3, seed: int = 0) -> float:
+    """Cross-validated LDA classification accuracy of ``labels`` (M,) from features ``x`` (M, d) (module docstring)."""
+    y, K = _codes(labels)
+    x = torch.as_tensor(x).double().reshape(y.shape[0], -1)
+    M = x.shape[0]
+    if folds <= 1:
+        W, b = lda_fit(x, y, K, ridge)
+        return float(((x @ W + b).argmax(-1) == y).double().mean())
+    perm = torch.randperm(M, generator=torch.Generator().manual_seed(seed))
+    correct = 0
+    for part in perm.chunk(min(folds, M)):
+        train = torch.ones(M, dtype=torch.bool)
+        train[part] = False
+        W, b = lda_fit(x[train], y[train], K, ridge)
+        correct += int(((x[part] @ W + b).argmax(-1) == y[part]).sum())
+    return correct / M
+
+
+def discrete_mutual_information(a: Tensor, b: Tensor) -> float:
+    """Plug-in ``I(A; B)`` in nats of two label arrays (M,) (module docstring)."""
+    ca, ka = _codes(a)
+    cb, kb = _codes(b)
+    joint = torch.bincount(ca * kb + cb, minlength=ka * kb).double().reshape(ka, kb)
+    p = joint / joint.sum()
+    pa, pb = p.sum(1, keepdim=True), p.sum(0, keepdim=True)
+    nz = p > 0
+    return float(max(0.0, (p[nz] * (p[nz] / (pa * pb).expand_as(p)[nz]).log()).sum()))
+
+
+def quantile_bins(x: Tensor, bins: int) -> Tensor:
+    """(M, d) bin index in [0, bins) of each value of ``x`` (M, d), equal-count bins per column."""
+    x = torch.as_tensor(x).double()
+    qs = torch.linspace(0, 1, bins + 1, dtype=torch.float64)[1:-1]
+    edges = torch.quantile(x, qs, dim=0).T.contiguous()  # (d, bins - 1)
+    return torch.searchsorted(edges, x.T.contiguous(), right=True).T
+
+
+def mutual_information(z: Tensor, labels: Tensor, bins: int = 10) -> float:
+    """Mean over latent dimensions of ``I(bin(z_j); labels)``, nats (module docstring)."""
+    codes = quantile_bins(torch.as_tensor(z).reshape(len(labels), -1), bins)
+    return sum(discrete_mutual_information(codes[:, j], torch.as_tensor(labels)) for j in range(codes.shape[1])) / codes.shape[1]
+
+
+@torch.no_grad()
+def latent_label_metrics(latent: Any, library: Any, folds: int = 5, bins: int = 10) -> dict[str, float]:
+    """``lda_accuracy`` and ``mutual_information`` (nats) of the per-frame latents (posterior means
+    of the window centred at every frame) of ``library`` against each frame's clip (its name)."""
+    return label_metrics(latent.encode_library(library), library.frame_clip, folds, bins)
+
+
+def label_metrics(z: Tensor, labels: Tensor, folds: int = 5, bins: int = 10) -> dict[str, float]:
+    """``lda_accuracy``, ``mutual_information`` (nats) and ``num_labels`` of latents ``z`` (M, d) and ``labels`` (M,)."""
+    z, labels = torch.as_tensor(z).detach().cpu(), torch.as_tensor(labels).detach().cpu().long()
+    return {
+        "lda_accuracy": lda_accuracy(z, labels, folds=folds),
+        "mutual_information": mutual_information(z, labels, bins=bins),
+        "num_labels": float(int(torch.unique(labels).numel())),
+    }
+
+
 __all__ = [
     "JointMAE",
     "JointMAEParams",
+    "discrete_mutual_information",
     "dofs_from_body_rotations",
     "joint_mae_deg",
     "joint_mae_deg_from_dofs",
+    "label_metrics",
+    "latent_label_metrics",
+    "lda_accuracy",
+    "lda_fit",
     "make_joint_mae",
+    "mutual_information",
+    "quantile_bins",
     "wrap_angle",
 ]

@@ -64,6 +64,12 @@ Numerical instability also terminates (reward 0). The episode is truncated (boot
 reset to the reference there). When the reference reaches its clip's end and the episode goes on, a
 new clip and time are drawn and the reference jumps there *without* resetting the simulator
 (``reference_jump: true``; ``false`` truncates the episode at the clip's end instead).
+
+**Domain randomization** [P section 4.9] (``randomization``, default off;
+:mod:`mocap_vmp.randomization`): body masses and ground friction redrawn at every reset of an env,
+random pushes (external wrenches on the root, head, hands and feet) on a per-env timer. The
+actuator model of Eqs. 9-11 is the simulator's option (``simulator.params.actuator_model``,
+:mod:`mocap_sim_mujoco.actuators`).
 """
 
 from __future__ import annotations
@@ -92,6 +98,7 @@ from mocap.rotations import (
 from mocap.skeleton import Skeleton
 from mocap.state import HUMANOID_FIELDS, HumanoidState, MotionFrames, Observations, SimState
 from mocap_vmp.features import FeatureLayout, clip_starts, standardize
+from mocap_vmp.randomization import DomainRandomizationParams, DomainRandomizer
 
 STATE_FORMAT = "mocap_vmp.tracking_env/1"
 Conditioning = Literal["M", "M5", "M10", "L", "LM"]
@@ -174,6 +181,11 @@ class VmpTrackerParams(BaseModel):
     reference_jump: bool = Field(
         True,
         description="at a clip's end jump to a random frame of a new clip without resetting the simulation [P]; false: truncate",
+    )
+    randomization: DomainRandomizationParams | None = Field(
+        None,
+        description="domain randomization [P section 4.9: body masses, ground friction, random pushes; "
+        "mocap_vmp.randomization]; null = off. The actuator model of Eqs. 9-11 is the simulator's actuator_model option",
     )
 
 
@@ -434,6 +446,7 @@ class VmpTrackingEnv:
         self._ref_feat = torch.zeros(N, self.layout.dim, device=dev)
         self._ref_dof = torch.zeros(N, A, device=dev)
         self._obs: Tensor | None = None
+        self.randomizer = DomainRandomizer(p.randomization, simulator, self._gen) if p.randomization is not None else None
 
     # ----------------------------------------------------------------------------- helpers
     def _observe(self, state: SimState, ids: Tensor | None = None) -> Tensor:
@@ -475,6 +488,8 @@ class VmpTrackingEnv:
         self.ee_counter[ids] = 0
         self.ep_return[ids] = 0.0
         self.jumps[ids] = 0
+        if self.randomizer is not None:
+            self.randomizer.on_reset(ids.cpu())
         self.sim.reset(ids, self.library.frames(clips, t0))
         q = self.sim.state.dof_pos[ids].to(self.hist_actions)
         self.hist_actions[ids] = hold_action(self.action_map, q)[:, None, :].expand(n, 2, -1)
@@ -496,6 +511,8 @@ class VmpTrackingEnv:
         if p.action_clip is not None:
             a = a.clamp(-p.action_clip, p.action_clip)
         targets = self.action_map(a, self._ref_dof)
+        if self.randomizer is not None:
+            self.randomizer.before_step()
         state = self.sim.step(targets)
         self.progress += 1
 
@@ -597,6 +614,8 @@ class VmpTrackingEnv:
         else:
             s = self.sim.state
             sd["sim_state"] = {f: getattr(s, f).cpu().clone() for f in _HUMANOID_FIELDS}
+        if self.randomizer is not None:
+            sd["randomization"] = self.randomizer.state_dict()
         return sd
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
@@ -621,6 +640,8 @@ class VmpTrackingEnv:
             )
         else:
             raise ValueError("the saved env state has no simulator state usable by this simulator")
+        if self.randomizer is not None and "randomization" in state:
+            self.randomizer.load_state_dict(state["randomization"])
         self._obs = self._observe(self.sim.state)
 
 
@@ -795,7 +816,9 @@ def load_vmp_file(path: str | Path, skeleton: Skeleton, device: Any = "cpu") -> 
     data = load_checkpoint(Path(path), map_location="cpu")
     tracker = data.get(TRACKER_KEY)
     if tracker is None:
-        raise ValueError(f"{path}: no tracking policy in this vmp checkpoint (a stage-1-only file; train with the vmp_track trainer)")
+        from mocap.checkpoint import CheckpointError
+
+        raise CheckpointError(f"{path}: no tracking policy in this vmp checkpoint (a stage-1-only file; train with the vmp_track trainer)")
     config = dict(data.get("config") or {})
     vparams = VmpParams(**{k: v for k, v in config.items() if k in VmpParams.model_fields})
     latent = make_vmp(vparams, skeleton=skeleton, checkpoint=path, device="cpu")

@@ -182,6 +182,11 @@ class SupervisedTrainer(Trainer):
         ctx.publish(TABLE_NAME).write_text(table)
         save(final=True)
         metrics = {**_metrics(last, step), **summary}
+        if lib.num_clips >= 2:  # paper section 5.4, labels = the clip names
+            from mocap_vmp.metrics import label_metrics
+
+            lm = label_metrics(frame_latents, lib.frame_clip)
+            metrics.update({"latent/lda_accuracy": lm["lda_accuracy"], "latent/mutual_information": lm["mutual_information"]})
         final = workdir / FINAL_NAME
         save_checkpoint(
             final,

@@ -1,4 +1,7 @@
-"""``mocap render``: kinematic playback of a motion clip into an MP4 or GIF (offscreen MuJoCo).
+"""``mocap render``: kinematic playback of a motion clip, or a policy's rollout, into an MP4 or GIF (offscreen MuJoCo).
+
+Policy mode: ``mocap render TARGET [--clip C | --generate] [--seconds S] [--out F]`` writes the
+rollout ``mocap play TARGET`` shows (:func:`mocap.play.render_policy`). Kinematic mode:
 
 ``mocap render --motion NAME [--source deepmimic] [--path P ...] [--humanoid amp] [--out NAME.mp4]
 [--seconds S] [--fps 30] [--width 640] [--height 480]`` loads the clip from a registered motion
@@ -31,7 +34,21 @@ def _fail(message: str) -> typer.Exit:
 
 
 def cmd_render(
-    motion: Annotated[str, typer.Option("--motion", "-m", help="clip name (as `mocap motions list` prints it)")],
+    target: Annotated[
+        Optional[Path],
+        typer.Argument(
+            help="policy mode: a checkpoint (policy.pt, latent.pt), checkpoint directory, run directory or spec, rolled out as `mocap play` shows it",
+            show_default=False,
+        ),
+    ] = None,
+    motion: Annotated[Optional[str], typer.Option("--motion", "-m", help="kinematic mode: clip name (as `mocap motions list` prints it)")] = None,
+    clip: Annotated[Optional[str], typer.Option("--clip", help="policy mode: the clip to imitate (default: the first)")] = None,
+    generate: Annotated[bool, typer.Option("--generate", help="policy mode: random motion from the latent prior instead")] = False,
+    noise: Annotated[float, typer.Option("--noise", help="policy mode, --generate: prior noise scale")] = 1.0,
+    seed: Annotated[int, typer.Option("--seed", help="policy mode, --generate: seed of the start state and prior noise")] = 0,
+    imitator_only: Annotated[
+        bool, typer.Option("--imitator-only", help="policy mode: for a latent space, roll out the imitator it was distilled from")
+    ] = False,
     source: Annotated[str, typer.Option("--source", help="registered motion source (deepmimic, amass, npz, ...)")] = "deepmimic",
     path: Annotated[
         Optional[list[Path]], typer.Option("--path", "-p", help="file or folder for the source's 'paths' (repeatable)", show_default=False)
@@ -45,10 +62,16 @@ def cmd_render(
     width: Annotated[int, typer.Option("--width", help="frame width, pixels")] = 640,
     height: Annotated[int, typer.Option("--height", help="frame height, pixels")] = 480,
 ) -> None:
-    """Render a motion clip (kinematic playback) to an MP4 or GIF video."""
+    """Render a motion clip (--motion: kinematic playback) or a policy's rollout (TARGET) to an MP4 or GIF video."""
     from mocap.motion.commands import load_motion_set
 
-    out_path = out if out is not None else Path(f"{motion}.mp4")
+    if target is not None and motion is not None:
+        raise _fail("give a TARGET (a policy's rollout) or --motion (kinematic playback), not both")
+    if target is None and motion is None:
+        raise _fail("nothing to render: give a TARGET (policy.pt, latent.pt, checkpoint/run directory, spec) or --motion NAME")
+    if target is None and (clip is not None or generate):
+        raise _fail("--clip and --generate need a TARGET policy; kinematic playback takes --motion")
+    out_path = out if out is not None else Path(f"{motion or ('generate' if generate else clip or 'rollout')}.mp4")
     if out_path.suffix.lower() not in (".mp4", ".gif"):
         raise _fail(f"--out {str(out_path)!r}: the video must be a .mp4 or .gif file")
     if not fps > 0 or fps > 1000:
@@ -57,6 +80,9 @@ def cmd_render(
         raise _fail(f"--width/--height must be 16..8192 pixels, got {width}x{height}")
     if seconds is not None and not seconds > 0:
         raise _fail(f"--seconds must be positive, got {seconds:g}")
+    if target is not None:
+        _render_policy(target, out_path, clip, seconds, generate, noise, seed, imitator_only, width, height)
+        return
 
     mset, hname = load_motion_set(source, path, None, humanoid)
     names = [c.name for c in mset.clips]
@@ -98,6 +124,22 @@ def cmd_render(
     )
 
 
+def _render_policy(
+    target: Path, out: Path, clip: str | None, seconds: float | None, generate: bool, noise: float, seed: int, imitator_only: bool,
+    width: int, height: int,
+) -> None:
+    """Policy mode: :func:`mocap.play.render_policy`, the rollout ``mocap play`` shows (frames at the
+    simulator's control rate; ``--fps`` is for kinematic playback)."""
+    from mocap.play import render_policy
+
+    with Console(stderr=True).status(f"rendering {target}"):
+        written, what = render_policy(
+            target, out, clip=clip, seconds=seconds, generate=generate, noise=noise, seed=seed, imitator_only=imitator_only,
+            width=width, height=height,
+        )
+    Console(soft_wrap=True).print(f"wrote {written} ({what}, {width}x{height})", highlight=False)
+
+
 def _sample(clip: Any, humanoid: str, seconds: float | None, fps: float) -> tuple[Any, Any, int]:
     """MotionFrames of ``clip`` every ``1/fps`` s over ``[0, seconds]``, its skeleton, the frame count."""
     import torch
@@ -115,4 +157,7 @@ def _sample(clip: Any, humanoid: str, seconds: float | None, fps: float) -> tupl
 
 @hookimpl
 def register_commands(app: Any) -> None:
+    from mocap.play import cmd_play
+
     app.command("render")(cmd_render)
+    app.command("play")(cmd_play)

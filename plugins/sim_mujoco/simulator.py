@@ -62,6 +62,12 @@ is put back into the state of its last :meth:`reset` (or :meth:`set_target`), it
 are untouched. MuJoCo's own auto-reset is disabled (it would silently teleport an env to the
 model's rest state).
 
+Options for VMP (both off by default, :class:`MujocoParams`): ``actuator_model`` computes the joint
+torques of VMP's Eqs. 9-11 at every physics step on motor actuators (one rollout call per substep;
+:mod:`mocap_sim_mujoco.actuators`, with its measured stability limits); :meth:`set_external_wrench`
+holds external forces / torques on bodies (pushes) and :meth:`env_models` gives per-env model copies
+(mass and friction randomization).
+
 Props (all optional, per env, see :class:`MujocoParams`):
 
 * ``target``: a free box (a pillar by default) for the ``strike`` task: :meth:`set_target`,
@@ -74,6 +80,7 @@ Props (all optional, per env, see :class:`MujocoParams`):
 
 from __future__ import annotations
 
+import copy
 import math
 from typing import Any
 import os
@@ -90,6 +97,7 @@ from mocap.interfaces import Simulator
 from mocap.rotations import quat_apply, quat_conjugate, quat_normalize
 from mocap.skeleton import Skeleton
 from mocap.state import HumanoidState, SimState
+from mocap_sim_mujoco.actuators import ActuatorModel, ActuatorModelParams, explicit_stability_ratio, to_motor_actuators
 from mocap_sim_mujoco.mjcf import FLOOR_GEOM, ModelIndex, build_mjcf, model_index
 from mocap_sim_mujoco.terrain import Terrain, TerrainParams, height_map
 
@@ -100,6 +108,7 @@ TARGET_JOINT = "target_root"
 MARKER_PREFIX = "marker"
 _FULL = mujoco.mjtState.mjSTATE_FULLPHYSICS
 _CTRL = int(mujoco.mjtState.mjSTATE_CTRL)
+_XFRC = int(mujoco.mjtState.mjSTATE_XFRC_APPLIED)
 _KIN_FIELDS = 13  # framepos 3, framequat 4, framelinvel 3, frameangvel 3
 
 
@@ -136,6 +145,13 @@ class MujocoParams(BaseModel):
     markers: int = Field(0, ge=0, description="visual-only marker spheres per env")
     marker_radius: float = Field(0.05, gt=0.0)
     marker_rgba: tuple[float, float, float, float] = (0.95, 0.15, 0.15, 1.0)
+    actuator_model: ActuatorModelParams | None = Field(
+        None,
+        description="VMP's actuator model (Eqs. 9-11: PD, Coulomb + viscous friction, torque-speed envelope) computed by the "
+        "simulator at every physics step on motor actuators (mocap_sim_mujoco.actuators); default None = MuJoCo position "
+        "actuators. The PD damping becomes explicit: needs timestep <= ~1/555 s on amp (refused above; use timestep 0.0016667, "
+        "substeps 20 for a 30 Hz control step)",
+    )
 
     @property
     def dt(self) -> float:
@@ -266,6 +282,17 @@ class MujocoSimulator(Simulator):
         self._dof_qpos = self._qp + idx.dof_qpos
         self._dof_qvel = self._qv + idx.dof_qvel
         self._act = idx.actuator_ids
+        self.actuators: ActuatorModel | None = None
+        if p.actuator_model is not None:
+            self.actuators = ActuatorModel.for_skeleton(skeleton, p.actuator_model)
+            to_motor_actuators(m, self._act)
+            ratio = explicit_stability_ratio(m, idx.dof_qvel, self.actuators.kd, p.timestep)
+            if ratio > p.actuator_model.max_stability_ratio:
+                raise ValueError(
+                    f"actuator_model: timestep {p.timestep:.6g} s is too large for explicit PD damping on this humanoid "
+                    f"(max timestep kd / M_jj = {ratio:.3g} > {p.actuator_model.max_stability_ratio}); use timestep <= "
+                    f"{p.timestep * p.actuator_model.max_stability_ratio / ratio:.6g} s (more substeps)"
+                )
         if p.target is not None:
             jid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, TARGET_JOINT)
             self._target_qpos = self._qp + int(m.jnt_qposadr[jid])
@@ -307,6 +334,9 @@ class MujocoSimulator(Simulator):
         self._markers[..., 2] = -10.0
         self._instability_count = 0
         self._cached: SimState | None = None
+        self._xfrc = np.zeros((N, m.nbody, 6))  # external wrenches (set_external_wrench), world frame
+        self._xfrc_used = False
+        self._own_models = False
         self._kinematics()
 
     # ------------------------------------------------------------------------------ setup
@@ -353,23 +383,27 @@ class MujocoSimulator(Simulator):
         if tuple(actions.shape) != (N, D):
             raise ValueError(f"actions must be ({N}, {D}) PD targets, got {tuple(actions.shape)}")
         a = actions.detach().to(device="cpu", dtype=torch.float64).numpy()
-        if self.index.identity_order and self.model.nu == D:
-            self._ctrl[:] = a[:, None, :]
+        if self.actuators is not None:
+            self._rollout_actuated(a)
         else:
-            self._ctrl[:, :, self._act] = a[:, None, :]
-        self._pool.rollout(
-            self._models,
-            self._datas,
-            self._S,
-            self._ctrl,
-            control_spec=_CTRL,
-            skip_checks=True,
-            nstep=self.params.substeps,
-            initial_warmstart=self._warm,
-            state=self._traj,
-            sensordata=self._sens,
-            chunk_size=self.params.chunk_size,
-        )
+            if self.index.identity_order and self.model.nu == D:
+                self._ctrl[:] = a[:, None, :]
+            else:
+                self._ctrl[:, :, self._act] = a[:, None, :]
+            control, spec = self._control(self._ctrl)
+            self._pool.rollout(
+                self._models,
+                self._datas,
+                self._S,
+                control,
+                control_spec=spec,
+                skip_checks=True,
+                nstep=self.params.substeps,
+                initial_warmstart=self._warm,
+                state=self._traj,
+                sensordata=self._sens,
+                chunk_size=self.params.chunk_size,
+            )
         bad = self._detect_unstable()
         self._update_warmstart(bad)
         np.copyto(self._S, self._traj[:, -1])
@@ -386,6 +420,76 @@ class MujocoSimulator(Simulator):
         self._kinematics()
         self._cached = None
         return self.state
+
+    def _rollout_actuated(self, targets: np.ndarray) -> None:
+        """The control step with the actuator model: one rollout call per physics substep, the joint
+        torques (Eq. 11) computed in between from that substep's qpos / qvel, the targets held.
+        Fills ``_traj`` and ``_sens`` like the single rollout call."""
+        assert self.actuators is not None
+        N, h = self.num_envs, self.params.timestep
+        qv = slice(self._qv, self._qv + self.model.nv)
+        S = self._S.copy()
+        warm = self._warm.copy()
+        ctrl = np.zeros((N, 1, self.model.nu))
+        out = np.zeros((N, 1, self.nstate))
+        sens = np.zeros((N, 1, self.model.nsensordata))
+        for k in range(self.params.substeps):
+            ctrl[:, 0, self._act] = self.actuators.torque(targets, S[:, self._dof_qpos], S[:, self._dof_qvel])
+            control, spec = self._control(ctrl)
+            self._pool.rollout(
+                self._models,
+                self._datas,
+                S,
+                control,
+                control_spec=spec,
+                skip_checks=True,
+                nstep=1,
+                initial_warmstart=warm,
+                state=out,
+                sensordata=sens,
+                chunk_size=self.params.chunk_size,
+            )
+            self._traj[:, k] = out[:, 0]
+            self._sens[:, k] = sens[:, 0]
+            np.subtract(out[:, 0, qv], S[:, qv], out=warm)
+            warm *= 1.0 / h
+            np.nan_to_num(warm, copy=False, nan=0.0, posinf=0.0, neginf=0.0)
+            S[:] = out[:, 0]
+            S[:, 0] = 0.0
+
+    def _control(self, ctrl: np.ndarray) -> tuple[np.ndarray, int]:
+        """The rollout control array and spec: ``ctrl`` alone, or (once :meth:`set_external_wrench`
+        was used) ``ctrl`` plus every body's ``xfrc_applied``, held over the substeps."""
+        if not self._xfrc_used:
+            return ctrl, _CTRL
+        N, T = ctrl.shape[:2]
+        x = np.broadcast_to(self._xfrc.reshape(N, 1, -1), (N, T, self._xfrc[0].size))
+        return np.ascontiguousarray(np.concatenate((ctrl, x), -1)), _CTRL | _XFRC
+
+    def set_external_wrench(self, env_ids: Tensor, wrench: Tensor | np.ndarray) -> None:
+        """Hold external wrenches on envs ``env_ids`` (K,) until changed or reset: ``wrench`` (K, B, 6)
+        per skeleton body, force (N) then torque (N m), world frame, at the body's centre of mass
+        (MuJoCo ``xfrc_applied``). A reset of an env clears its wrenches."""
+        ids = self._ids(env_ids)
+        w = np.asarray(torch.as_tensor(wrench).detach().to("cpu", torch.float64)).reshape(len(ids), self.skeleton.num_bodies, 6)
+        rows = self._xfrc[ids]
+        rows[:, self.index.body_ids] = w
+        self._xfrc[ids] = rows
+        self._xfrc_used = True
+
+    @property
+    def external_wrench(self) -> Tensor:
+        """(N, B, 6) the wrenches held by :meth:`set_external_wrench`."""
+        return self._tensor(self._xfrc[:, self.index.body_ids])
+
+    def env_models(self) -> list[mujoco.MjModel]:
+        """The N per-env models the stepping uses, made independent copies of :attr:`model` on the
+        first call (for per-env physical parameters: domain randomization). Edit them only between
+        steps; call ``mujoco.mj_setConst`` after changing masses."""
+        if not self._own_models:
+            self._models = [copy.copy(self.model) for _ in range(self.num_envs)]
+            self._own_models = True
+        return self._models
 
     def reset(self, env_ids: Tensor, state: HumanoidState) -> None:
         ids = self._ids(env_ids)
@@ -446,6 +550,7 @@ class MujocoSimulator(Simulator):
         self._dof_force[ids] = 0.0
         self._unstable[ids] = False
         self._warm[ids] = 0.0
+        self._xfrc[ids] = 0.0
         self._kinematics(ids)
         self._cached = None
 

@@ -17,7 +17,10 @@ stays at height 0 so that envs can spawn there):
   along ``|x|``; constant in y). Step edges are one grid cell wide slopes (height fields have no
   vertical faces);
 * ``slopes``: a triangle wave along ``|x|``: up at gradient ``slope`` (rise / run) for
-  ``slope_length`` metres, then down, repeated.
+  ``slope_length`` metres, then down, repeated;
+* ``obstacles``: ``obstacle_count`` axis-aligned blocks scattered uniformly over the square, each
+  with sides ``U[obstacle_size]`` and height ``U[obstacle_height]`` (overlaps take the higher);
+  discrete obstacles as in Rudin et al. 2021 (sides are one-cell slopes, as for stairs).
 
 Height queries follow MuJoCo's own triangulation of the height field: grid cell ``(i, j)`` (row
 ``i`` along y, column ``j`` along x) is split along its diagonal from ``(i, j)`` to
@@ -45,7 +48,7 @@ class TerrainParams(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    kind: Literal["flat", "rough", "stairs", "slopes"] = "rough"
+    kind: Literal["flat", "rough", "stairs", "slopes", "obstacles"] = "rough"
     size: float = Field(10.0, gt=0.5, description="half extent of the square terrain, m")
     resolution: float = Field(0.1, gt=0.005, description="grid spacing, m")
     flat_radius: float = Field(1.0, ge=0.0, description="half side of the flat spawn square around the origin, m")
@@ -56,7 +59,10 @@ class TerrainParams(BaseModel):
     steps_per_flight: int = Field(5, ge=1, description="stairs: steps up before the flight goes down again")
     slope: float = Field(0.15, ge=0.0, le=2.0, description="slopes: gradient, rise / run")
     slope_length: float = Field(2.0, gt=0.0, description="slopes: horizontal length of one ramp, m")
-    seed: int | None = Field(None, description="rough: noise seed (default: the simulator's seed)")
+    obstacle_count: int = Field(100, ge=0, description="obstacles: number of blocks")
+    obstacle_size: tuple[float, float] = Field((0.3, 1.0), description="obstacles: side length U[min, max], m")
+    obstacle_height: tuple[float, float] = Field((0.05, 0.3), description="obstacles: height U[min, max], m")
+    seed: int | None = Field(None, description="rough / obstacles: random seed (default: the simulator's seed)")
 
 
 class Terrain:
@@ -103,6 +109,16 @@ class Terrain:
             d = np.maximum(ax, 0.0)
             phase = np.mod(d, 2 * p.slope_length)
             h = p.slope * np.where(phase <= p.slope_length, phase, 2 * p.slope_length - phase)
+        elif p.kind == "obstacles":
+            h = np.zeros((self.n, self.n))
+            lo_s, hi_s = sorted(p.obstacle_size)
+            lo_h, hi_h = sorted(p.obstacle_height)
+            for _ in range(p.obstacle_count):
+                cx, cy = rng.uniform(-self.size, self.size, 2)
+                sx, sy = rng.uniform(lo_s, hi_s, 2)
+                height = rng.uniform(lo_h, hi_h)
+                block = (np.abs(x - cx) <= 0.5 * sx) & (np.abs(y - cy) <= 0.5 * sy)
+                h = np.where(block, np.maximum(h, height), h)
         else:  # pragma: no cover - pydantic restricts kind
             raise ValueError(f"unknown terrain kind {p.kind!r}")
         flat = (np.abs(x) <= p.flat_radius) & (np.abs(y) <= p.flat_radius)

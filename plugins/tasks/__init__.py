@@ -8,6 +8,12 @@ Modules:
 * :mod:`mocap_tasks.speed`: move at a target speed along a target direction;
 * :mod:`mocap_tasks.reach`: bring the right hand to a target point;
 * :mod:`mocap_tasks.strike`: knock a standing box over with the hand (the simulator's target prop);
+* :mod:`mocap_tasks.terrain`: follow a trajectory over a height-field terrain (PULSE / PACER);
+* :mod:`mocap_tasks.point_goal`: walk to a 2-D point (hybrid-RVQ navigation);
+* :mod:`mocap_tasks.inbetween`: reach library keyframes at irregular intervals (hybrid-RVQ in-betweening);
+* :mod:`mocap_tasks.generation`: roll out a latent space's prior (no reward; fall rate, diversity);
+* :mod:`mocap_tasks.tracking`: follow a library clip through the latent space: ``vr_tracking`` (PULSE,
+  head + hands), ``hmd_tracking`` (hybrid-RVQ, head only), ``motion_tracking`` (full body);
 * :mod:`mocap_tasks.plugin`: the entry point registering the three tasks.
 
 Every task follows :class:`mocap.interfaces.Task`: ``reset(env_ids, state)`` samples goals with the

@@ -5,9 +5,21 @@ from __future__ import annotations
 from typing import Any
 
 from mocap.hooks import hookimpl
+from mocap_tasks.generation import GenerationTaskParams, make_generation
+from mocap_tasks.inbetween import InbetweenParams, make_inbetween
+from mocap_tasks.point_goal import PointGoalParams, make_point_goal
 from mocap_tasks.reach import ReachParams, make_reach
+from mocap_tasks.terrain import TerrainTaskParams, make_terrain
 from mocap_tasks.speed import SpeedParams, make_speed
 from mocap_tasks.strike import StrikeParams, make_strike
+from mocap_tasks.tracking import (
+    HmdTrackingParams,
+    MotionTrackingParams,
+    VrTrackingParams,
+    make_hmd_tracking,
+    make_motion_tracking,
+    make_vr_tracking,
+)
 
 
 @hookimpl
@@ -31,4 +43,55 @@ def register_tasks(register: Any) -> None:
         params=StrikeParams,
         description="knock a standing box over with the right hand (simulator target prop); paper r = 1 - up.u_t, "
         "code 0.6 tilt + 0.4 approach, 1 when toppled; goal obs 15",
+    )
+    # tasks that follow a reference motion of the library (the env passes motions=; mocap_tasks.tracking)
+    register(
+        "vr_tracking",
+        make_vr_tracking,
+        params=VrTrackingParams,
+        description="PULSE VR 3-point tracking: follow the reference head and hands (goal s^g-vr, 72), full-body "
+        "PHC+ imitation reward; metrics success (3 points), mpjpe_g",
+    )
+    register(
+        "hmd_tracking",
+        make_hmd_tracking,
+        params=HmdTrackingParams,
+        description="Hybrid HMD tracking: follow the reference head (goal 5 x 13 head differences), head reward, "
+        "terminate at 1 m; metrics success (head), mpjpe_g",
+    )
+    register(
+        "motion_tracking",
+        make_motion_tracking,
+        params=MotionTrackingParams,
+        description="full-body imitation through the latent space: the imitator's goal, PHC imitation reward; "
+        "metrics success, mpjpe_g",
+    )
+    # terrain, point goal, in-betweening, generation (mocap_tasks.terrain / point_goal / inbetween / generation)
+    register(
+        "terrain",
+        make_terrain,
+        params=TerrainTaskParams,
+        description="PULSE/PACER: follow a 2-D trajectory over a height-field terrain (stairs, slopes, rough, obstacles); "
+        "r = exp(-2 ||p - tau||) (code: squared) + energy; goal obs 20 trajectory + 32 x 32 height map",
+    )
+    register(
+        "point_goal",
+        make_point_goal,
+        params=PointGoalParams,
+        description="Hybrid-RVQ point-goal navigation: reach a 2-D point within 10 m, new every 4 s; "
+        "r = 0.7 exp(-0.5 d^2) + 0.3 exp(-max(0, 1 - v.d_hat)^2), 1 on arrival; goal obs 2",
+    )
+    register(
+        "inbetween",
+        make_inbetween,
+        params=InbetweenParams,
+        description="Hybrid-RVQ motion in-betweening: reach library keyframes at irregular intervals in a 4-s window; "
+        "r = 0.1 r_root + 0.65 r_q + 0.1 r_alpha + 0.15 r_ee; goal obs 2 J 7 (+ time to arrival)",
+    )
+    register(
+        "generation",
+        make_generation,
+        params=GenerationTaskParams,
+        description="unconditional generation: the latent prior is rolled out (task action ignored, reward 0; not "
+        "with scratch); metrics fall rate, diversity",
     )

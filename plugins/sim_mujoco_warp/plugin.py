@@ -1,0 +1,23 @@
+"""Entry point of the ``mujoco_warp`` simulator plugin (group ``mocap``).
+
+Registers without Warp installed: the factory imports ``warp`` / ``mujoco_warp`` only when a spec
+builds the simulator (see :func:`mocap_sim_mujoco_warp.simulator.import_warp`).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from mocap.hooks import hookimpl
+from mocap_sim_mujoco_warp.simulator import MujocoWarpParams, make_simulator
+
+
+@hookimpl
+def register_simulators(register: Any) -> None:
+    register(
+        "mujoco_warp",
+        make_simulator,
+        params=MujocoWarpParams,
+        description="MuJoCo Warp: the mujoco simulator's MJCF stepped as nworld = N worlds on a GPU (or Warp's CPU "
+        "device), state as torch tensors; needs pip install 'mocap[warp]'",
+    )
