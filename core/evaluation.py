@@ -226,21 +226,34 @@ class ImitationEval(Trainer):
             ctx.console.print(f"[yellow]skipped[/] {path}: {reason}")
         lib = MotionLibrary(motion_set, skeleton)
         upstream = ctx.upstream.get("imitator")
-        imitator = ctx.stage_component("imitator", checkpoint=upstream.checkpoint if upstream else None)
+        imitator = (
+            ctx.stage_component("imitator", checkpoint=upstream.checkpoint if upstream else None) if ctx.spec.imitator is not None else None
+        )
         latent_stage = ctx.upstream.get("latent")
+
+        def make_sim(n: int) -> Simulator:
+            return ctx.build("simulator", skeleton=skeleton, num_envs=n, seed=ctx.seed)
+
         if p.target != "imitator" and latent_stage is not None and latent_stage.checkpoint is not None:
             from mocap.distill import load_latent_state
             from mocap.latent_imitator import PDTargetTeacher, latent_imitator
 
             latent = ctx.stage_component("latent", checkpoint=latent_stage.checkpoint)
-            label = load_latent_state(latent_stage.checkpoint)["extra"].get("label", "policy_output")
-            imitator = latent_imitator(PDTargetTeacher(imitator) if label == "pd_targets" else imitator, latent)
-            ctx.console.print(f"imitation_eval: evaluating the {ctx.spec.latent.name} latent (z = encoder mean)")
+            if getattr(latent, "decodes_pd_targets", False) and callable(getattr(latent, "as_imitator", None)):
+                # a latent space with its own tracking policy (VMP): it imitates the reference itself
+                probe = make_sim(1)
+                dt = float(probe.dt)
+                probe.close()
+                imitator = latent.as_imitator(lib, dt=dt, device="cpu")
+                ctx.console.print(f"imitation_eval: evaluating the {ctx.spec.latent.name} latent's own tracking policy")
+            else:
+                label = load_latent_state(latent_stage.checkpoint)["extra"].get("label", "policy_output")
+                imitator = latent_imitator(PDTargetTeacher(imitator) if label == "pd_targets" else imitator, latent)
+                ctx.console.print(f"imitation_eval: evaluating the {ctx.spec.latent.name} latent (z = encoder mean)")
         elif p.target == "latent":
             raise StageFailed("imitation_eval target 'latent': the spec has no trained latent stage")
-
-        def make_sim(n: int) -> Simulator:
-            return ctx.build("simulator", skeleton=skeleton, num_envs=n, seed=ctx.seed)
+        if imitator is None:
+            raise StageFailed("imitation_eval: the spec has no imitator and its latent space cannot imitate on its own")
 
         table = evaluate_imitator(imitator, lib, make_sim, p, self._metrics(ctx), ctx.console)
         atomic_write_json(ctx.publish("imitation_eval.json"), table)

@@ -171,7 +171,7 @@ def _reference_free(obs: Observations) -> Observations:
 
 def evaluate_generation(
     latent: Any,
-    imitator: Imitator,
+    imitator: Imitator | None,
     to_pd_targets: Callable[[Observations, Tensor], Tensor],
     lib: MotionLibrary,
     make_sim: Callable[[int], Simulator],
@@ -211,10 +211,19 @@ def evaluate_generation(
     frames_by_env: list[list[Any]] = [[] for _ in range(min(p.video_rollouts, p.num_rollouts))]
     from rich.progress import Progress
 
+    sixd = getattr(getattr(imitator, "observation", None), "sixd", "zhou")
+
+    def observe(state: Any, ref: Any) -> Observations:
+        if imitator is None:  # a latent that decodes to PD targets on its own (VMP): plain proprioception
+            from mocap.observations import proprioception
+
+            return Observations(proprio=proprioception(state, sixd).float(), goal=None, extra={})
+        return _reference_free(imitator.observe(state, ref))
+
     with Progress(transient=True, console=console, disable=console is None) as bar:
         task = bar.add_task("generation", total=steps)
         for k in range(1, steps + 1):
-            obs = _reference_free(imitator.observe(state, ref))
+            obs = observe(state, ref)
             props.append(obs.proprio.float().cpu())
             with torch.no_grad():
                 out = latent.random_action(obs, noise_scale=p.noise_scale, generator=gen)
@@ -235,7 +244,7 @@ def evaluate_generation(
                 for e in range(len(frames_by_env)):
                     frames_by_env[e].append((state.root_pos[e].cpu(), state.root_rot[e].cpu(), state.dof_pos[e].cpu()))
             bar.advance(task)
-    obs = _reference_free(imitator.observe(state, ref))
+    obs = observe(state, ref)
     props.append(obs.proprio.float().cpu())
     sim.close()
     dt = sim.dt
@@ -246,7 +255,6 @@ def evaluate_generation(
     traj = in_start_frame(body, origin, heading)
     prop = torch.stack(props)  # (T + 1, N, P)
     gen_trans = torch.cat([prop[:-1], prop[1:]], -1).reshape(-1, 2 * prop.shape[-1])
-    sixd = getattr(getattr(imitator, "observation", None), "sixd", "zhou")
     matching = motion_matching(gen_trans, dataset_transitions(lib, dt, sixd), p.filter_threshold)
     result: dict[str, Any] = {
         "protocol": "mocap-generation-v1 (prior rollouts from library start states; see mocap.generation)",
@@ -289,11 +297,16 @@ class GenerationEval:
         if latent_stage is None or latent_stage.checkpoint is None:
             raise StageFailed("generation_eval needs a trained latent stage")
         upstream = ctx.upstream.get("imitator")
-        imitator = ctx.stage_component("imitator", checkpoint=upstream.checkpoint if upstream else None)
+        imitator = (
+            ctx.stage_component("imitator", checkpoint=upstream.checkpoint if upstream else None) if ctx.spec.imitator is not None else None
+        )
         latent = ctx.stage_component("latent", checkpoint=latent_stage.checkpoint)
         if hasattr(latent, "eval"):
             latent.eval()
-        label = load_latent_state(latent_stage.checkpoint)["extra"].get("label", "policy_output")
+        if getattr(latent, "decodes_pd_targets", False):  # VMP: random_action already gives PD targets
+            label = "pd_targets"
+        else:
+            label = load_latent_state(latent_stage.checkpoint)["extra"].get("label", "policy_output")
         skeleton = ctx.skeleton
         lib = MotionLibrary(ctx.build("motions").load(skeleton), skeleton)
 
@@ -377,10 +390,11 @@ def register_commands(app):  # type: ignore[no-untyped-def]
             raise UserError(f"{target}: not a latent space (generation samples a latent space's prior)")
         loaded = build_evaluation_target(target_info, plugins)
         params = GenerationParams(num_rollouts=rollouts, seconds=seconds, noise_scale=noise, seed=seed)
+        own = bool(getattr(loaded.latent, "decodes_pd_targets", False))  # VMP: random_action gives PD targets
+        imitator = None if own else loaded.imitator
+        mapping = (lambda obs, out: out) if own else loaded.to_pd_targets
         try:
-            result = evaluate_generation(
-                loaded.latent, loaded.imitator, loaded.to_pd_targets, loaded.library, loaded.make_sim, params, video=video, console=console
-            )
+            result = evaluate_generation(loaded.latent, imitator, mapping, loaded.library, loaded.make_sim, params, video=video, console=console)
         except ValueError as exc:
             raise UserError(str(exc)) from None
         result["checkpoint"] = str(target_info.latent_checkpoint)

@@ -288,15 +288,6 @@ def test_latent_label_metrics_on_bundled_clips(amp):
     assert 0.0 < out["mutual_information"] <= math.log(2) + 1e-9
 
 
-def _hierarchy_knows_pd_decoders() -> bool:
-    import inspect
-
-    import mocap.hierarchy
-
-    return "decodes_pd_targets" in inspect.getsource(mocap.hierarchy.make_task_env)
-
-
-@pytest.mark.skipif(not _hierarchy_knows_pd_decoders(), reason="needs make_task_env to accept latents with decodes_pd_targets (issue 7)")
 def test_mocap_run_of_a_task_spec_through_a_vmp_checkpoint(vmp_file, tmp_path):
     from mocap.testing import invoke
 
@@ -308,6 +299,8 @@ def test_mocap_run_of_a_task_spec_through_a_vmp_checkpoint(vmp_file, tmp_path):
         f"  checkpoint: {vmp_file}\n"
         "task:\n  name: speed\n  trainer: {name: ppo, params: {num_envs: 2, horizon: 4, total_env_steps: 16, minibatch_size: 4, "
         "epochs: 1, actor_hidden: [16], critic_hidden: [16], torch_threads: 1}}\n"
+        "eval:\n  trainer: {name: eval_suite, params: {imitation: {video: false}, "
+        "generation: {num_rollouts: 2, seconds: 0.3, video_rollouts: 0}}}\n"
     )
     result = invoke(["run", spec, "--out", tmp_path / "runs" / "t"])
     assert result.exit_code == 0, result.output + (result.stderr or "")
@@ -315,6 +308,16 @@ def test_mocap_run_of_a_task_spec_through_a_vmp_checkpoint(vmp_file, tmp_path):
     from mocap.rl.networks import load_policy
 
     assert load_policy(policy).action_dim == 8
+    # eval_suite of the cell: VMP imitates with its own tracker and samples its prior
+    import json
+
+    stages = {s["stage"]: s for s in json.loads((tmp_path / "runs" / "t" / "stages.json").read_text())}
+    m = stages["eval"]["metrics"]
+    assert m["imitation/total"] == 1 and 0.0 <= m["imitation/success_rate"] <= 1.0
+    assert 0.0 <= m["generation/fall_rate"] <= 1.0
+    gen = invoke(["generate", tmp_path / "runs" / "t", "--rollouts", "2", "--seconds", "0.3", "--json", tmp_path / "g.json"])
+    assert gen.exit_code == 0, gen.output + (gen.stderr or "")
+    assert json.loads((tmp_path / "g.json").read_text())["num_rollouts"] == 2
 
 
 def test_the_vae_trainer_reports_the_latent_metrics(amp, tmp_path):
