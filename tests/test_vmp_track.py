@@ -380,6 +380,23 @@ def test_reward_is_alive_bonus_when_tracking_is_perfect(amp, lib, latent):
     env.close()
 
 
+def test_only_positive_rewards_clips_the_step_reward_at_zero(amp, lib, latent):
+    """Wild actions: the paper's reward goes negative; the switch clips exactly those steps to 0."""
+    g = torch.Generator().manual_seed(3)
+    acts = [2.0 * torch.randn(3, amp.num_dofs, generator=g) for _ in range(6)]
+    plain, clipped = _env(amp, lib, latent, seed=1), _env(amp, lib, latent, seed=1, only_positive_rewards=True)
+    plain.reset()
+    clipped.reset()
+    saw_negative = False
+    for a in acts:
+        r0, r1 = plain.step(a).reward, clipped.step(a).reward
+        saw_negative |= bool((r0 < 0).any())
+        assert torch.equal(r1, r0.clamp_min(0.0))
+    assert saw_negative
+    plain.close()
+    clipped.close()
+
+
 # -------------------------------------------------------------------------------------- resume
 def test_env_resume_is_exact(amp, lib, latent):
     N, T = 3, 16

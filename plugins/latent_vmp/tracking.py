@@ -167,6 +167,13 @@ class VmpTrackerParams(BaseModel):
         description="floor on the standardization std used by the reward, natural units (m, rad, m/s, rad/s) [D]: the VAE's "
         "statistics floor features that never vary in its data at ~1e-6, which would turn any error there into ~1e12",
     )
+    only_positive_rewards: bool = Field(
+        False,
+        description="clip each step's total reward at 0 from below [D, legged_gym's only_positive_rewards]: Eq. 6 sums "
+        "squared errors over every standardized dimension, so early in training the step reward is far below zero "
+        "(measured here: about -86 per step against the +6 alive bonus) and ending the episode as soon as the "
+        "termination allows is what PPO learns (episodes stayed at the 3-s minimum); [P] no clipping",
+    )
     smoothness_on: Literal["targets", "actions"] = Field(
         "targets",
         description="what the action-rate / acceleration penalties see: PD targets in rad ([P] a_t = PD targets) or raw actions [D]",
@@ -527,6 +534,8 @@ class VmpTrackingEnv:
         tau = state.dof_force.to(a) if state.dof_force.numel() else state.dof_force
         smooth = smoothness_errors(x.float(), hist[:, 0], hist[:, 1], tau)
         reward, terms = vmp_reward(track, smooth, p.reward)
+        if p.only_positive_rewards:
+            reward = reward.clamp_min(0.0)
         ps = layout.slices["p"]
         ee_err = end_effector_error(self._ref_feat[:, ps], sim_feat[:, ps], p.termination_norm)
         ee_err = torch.nan_to_num(ee_err, nan=math.inf)
