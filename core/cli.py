@@ -131,23 +131,56 @@ def cmd_run(
         Optional[Path], typer.Option("--store", help="artifact store shared between runs (default: <run dir>/../artifacts)")
     ] = None,
     jobs: Annotated[int, typer.Option("--jobs", "-j", min=1, help="comparison specs: cells run at the same time (processes)")] = 1,
+    executor: Annotated[
+        str,
+        typer.Option(
+            "--executor",
+            help="comparison specs: where cells run: 'local' (this process, or --jobs local processes) or "
+            "'ray' (Ray tasks, at most --jobs at a time; pip install 'mocap[ray]')",
+        ),
+    ] = "local",
+    ray_address: Annotated[
+        Optional[str],
+        typer.Option(
+            "--ray-address",
+            help="with --executor ray: the cluster to join ('auto': the one running on this machine, or an address); "
+            "default: start a local Ray instance. Several nodes need the run directory on a shared filesystem",
+            show_default=False,
+        ),
+    ] = None,
+    ray_cpus_per_cell: Annotated[
+        float, typer.Option("--ray-cpus-per-cell", min=0.01, help="with --executor ray: CPUs Ray reserves for each cell")
+    ] = 1.0,
 ) -> None:
     """Run a spec: imitator -> latent -> task -> eval, reusing artifacts of identical stages.
 
     A spec with a ``matrix:`` runs one cell per combination of its values (see mocap.matrix) and
     writes a comparison table."""
-    from mocap.matrix import comparison, load_cells, run_cells
+    from mocap.matrix import EXECUTORS, ExecutorError, comparison, import_ray, load_cells, run_cells
     from mocap.pipeline import PipelineInterrupted, run_pipeline
 
+    if executor not in EXECUTORS:
+        raise fail(f"--executor {executor}: choose one of {', '.join(EXECUTORS)}")
+    if executor != "ray" and (ray_address is not None or ray_cpus_per_cell != 1.0):
+        raise fail("--ray-address and --ray-cpus-per-cell need --executor ray")
     cells = load_cells(spec, _plugins(), set_ or [])
     if store is not None:
         check_output_dir(store, "--store")
     if len(cells) > 1 or cells[0][0].name:
         out_dir = out or Path("runs") / cells[0][1].spec.name
         check_output_dir(out_dir)
-        console.print(f"comparison: {len(cells)} cells -> {out_dir}/<cell>/", highlight=False)
         try:
-            status = run_cells(cells, _plugins(), out_dir, console, jobs=jobs, store=store)
+            if executor == "ray":
+                import_ray()  # before anything runs
+            console.print(f"comparison: {len(cells)} cells -> {out_dir}/<cell>/", highlight=False)
+            status = run_cells(
+                cells, _plugins(), out_dir, console, jobs=jobs, store=store,
+                executor=executor, ray_address=ray_address, cpus_per_cell=ray_cpus_per_cell,
+            )
+        except ExecutorError as exc:
+            from rich.markup import escape
+
+            raise fail(escape(str(exc))) from None  # escaped: rich would eat the "[ray]" of "mocap[ray]"
         except PipelineInterrupted as exc:
             err_console.print(f"[yellow]interrupted[/] during stage {exc.args[0]!r}; run the same command again to resume.")
             raise typer.Exit(EXIT_INTERRUPTED) from None
@@ -163,6 +196,8 @@ def cmd_run(
             raise typer.Exit(EXIT_USER_ERROR)
         return
     resolved = cells[0][1]
+    if executor == "ray":
+        console.print("note: --executor ray runs the cells of comparison specs; this spec has no matrix and runs here", highlight=False)
     out_dir = out or Path("runs") / resolved.spec.name
     check_output_dir(out_dir)
     if store is None:

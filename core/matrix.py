@@ -16,6 +16,12 @@ processes, under ``runs/<name>/<cell>/`` with one artifact store ``runs/<name>/a
 stage that several cells share (the same section and upstream) is trained once: a per-artifact
 lock makes parallel cells wait for each other instead of training it twice.
 
+``--executor ray`` runs the same per-cell command (``python -m mocap.cli run <cell>/cell.yaml``) as a
+Ray task instead of a local process (optional extra ``mocap[ray]``): on a local Ray instance by
+default, or on an existing cluster (``--ray-address auto``), at most ``--jobs`` cells at a time. The
+artifact lock is a file lock, so on a cluster with several nodes the run directory and the artifact
+store must be on a filesystem every node shares (and mocap installed on every node).
+
 A cell's name joins ``<last path part>-<label>`` for every axis, where a value's label is its
 ``name`` (mappings) or the value itself (scalars), e.g. ``latent-pulse_name-speed_seed-0``.
 ``runs/<name>/comparison.md`` / ``.json`` tabulate every cell's final stage metrics and, over the
@@ -30,7 +36,9 @@ import copy
 import itertools
 import json
 import math
+import os
 import re
+import signal
 import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
@@ -117,13 +125,140 @@ def load_cells(path: Path, plugins: Any, overrides: list[str] | None = None) -> 
 
 
 # ---------------------------------------------------------------------------------- running
-def run_cells(
-    cells: list[tuple[Cell, Any]], plugins: Any, out_dir: Path, console: Any, jobs: int = 1, store: Path | None = None
+EXECUTORS = ("local", "ray")
+RAY_MISSING = "--executor ray needs Ray: pip install 'mocap[ray]'"
+
+
+class ExecutorError(Exception):
+    """An executor that cannot be used (Ray missing, a cluster that cannot be reached): one line."""
+
+
+def import_ray() -> Any:
+    """The ``ray`` module, or :class:`ExecutorError` with the install line when it is missing."""
+    try:
+        import ray
+    except ImportError:
+        raise ExecutorError(RAY_MISSING) from None
+    return ray
+
+
+def _write_cell_spec(cell: Cell, resolved: Any, out_dir: Path) -> tuple[Path, Path]:
+    """``(cell dir, cell.yaml)``: the cell's resolved spec, the file its process runs."""
+    cell_dir = out_dir / cell.name
+    cell_dir.mkdir(parents=True, exist_ok=True)
+    spec_file = cell_dir / "cell.yaml"
+    spec_file.write_text(resolved.to_yaml())
+    return cell_dir, spec_file
+
+
+def cell_command(spec_file: str | Path, cell_dir: str | Path, store: str | Path, python: str | None = None) -> list[str]:
+    """The command that runs one cell in its own process (``--jobs`` and ``--executor ray``)."""
+    return [python or sys.executable, "-m", "mocap.cli", "run", str(spec_file), "--out", str(cell_dir), "--store", str(store)]
+
+
+def _outcome(returncode: int, cell_dir: str | Path) -> str:
+    return "done" if returncode == 0 else f"failed (exit {returncode}; see {Path(cell_dir) / 'run.log'})"
+
+
+def _ray_cell(spec_file: str, cell_dir: str, store: str, cwd: str) -> str:
+    """A Ray task: run one cell's command with this worker's Python, output in ``<cell>/run.log``.
+    Cancelled (Ctrl-C in the driver), it passes SIGINT on so the cell saves its checkpoint."""
+    with (Path(cell_dir) / "run.log").open("w") as log:
+        proc = subprocess.Popen(
+            cell_command(spec_file, cell_dir, store), stdout=log, stderr=subprocess.STDOUT, cwd=cwd if os.path.isdir(cwd) else None
+        )
+        try:
+            return _outcome(proc.wait(), cell_dir)
+        except BaseException:
+            proc.send_signal(signal.SIGINT)
+            try:
+                proc.wait(timeout=120)
+            except BaseException:  # noqa: BLE001 - never leave the cell's process behind
+                proc.kill()
+            raise
+
+
+def _run_cells_ray(
+    cells: list[tuple[Cell, Any]],
+    out_dir: Path,
+    console: Any,
+    jobs: int,
+    store: Path,
+    address: str | None,
+    cpus_per_cell: float,
 ) -> dict[str, str]:
-    """Run every cell (sequentially, or ``jobs`` processes at a time); returns cell -> "done" / error text."""
+    ray = import_ray()
+    started = False
+    if not ray.is_initialized():  # a caller (or a test) may have started Ray itself: use that one
+        try:
+            if address:
+                ray.init(address=address)
+            else:
+                ray.init(include_dashboard=False)
+        except Exception as exc:  # noqa: BLE001 - no cluster at that address, a port in use, ...
+            first = (str(exc).strip().splitlines() or [""])[0]
+            where = f"--ray-address {address}" if address else "a local Ray instance"
+            raise ExecutorError(f"--executor ray: cannot start or join {where}: {type(exc).__name__}: {first}") from None
+        started = True
+    try:
+        cpus = float(ray.cluster_resources().get("CPU", 0.0))
+        if cpus_per_cell > cpus:
+            raise ExecutorError(f"--ray-cpus-per-cell {cpus_per_cell:g}: the Ray cluster has {cpus:g} CPUs in all; ask for at most that")
+        console.print(f"ray: {cpus:g} CPUs, {cpus_per_cell:g} per cell, at most {jobs} cell(s) at a time", highlight=False)
+        task = ray.remote(_ray_cell).options(num_cpus=cpus_per_cell, max_retries=0)
+        cwd = str(Path.cwd())
+        status: dict[str, str] = {}
+        pending = list(cells)
+        running: dict[Any, str] = {}
+        try:
+            while pending or running:
+                while pending and len(running) < jobs:
+                    cell, resolved = pending.pop(0)
+                    cell_dir, spec_file = _write_cell_spec(cell, resolved, out_dir)
+                    running[task.remote(str(spec_file), str(cell_dir), str(store), cwd)] = cell.name
+                done, _ = ray.wait(list(running), num_returns=1)
+                for ref in done:
+                    name = running.pop(ref)
+                    try:
+                        result = ray.get(ref)
+                    except Exception as exc:  # noqa: BLE001 - the worker died, the task was cancelled, ...
+                        first = (str(exc).strip().splitlines() or [""])[0]
+                        result = f"failed (ray: {type(exc).__name__}: {first}; see {out_dir / name / 'run.log'})"
+                    console.print(f"cell {name}: {result}", highlight=False)
+                    status[name] = result
+        except KeyboardInterrupt:
+            for ref in running:  # the cells get SIGINT and save their checkpoints
+                ray.cancel(ref)
+            if running:
+                ray.wait(list(running), num_returns=len(running), timeout=150)
+            raise
+        return status
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def run_cells(
+    cells: list[tuple[Cell, Any]],
+    plugins: Any,
+    out_dir: Path,
+    console: Any,
+    jobs: int = 1,
+    store: Path | None = None,
+    executor: str = "local",
+    ray_address: str | None = None,
+    cpus_per_cell: float = 1.0,
+) -> dict[str, str]:
+    """Run every cell (sequentially, ``jobs`` processes at a time, or with ``executor="ray"`` as Ray
+    tasks, ``jobs`` at a time); returns cell -> "done" / error text."""
     from mocap.pipeline import run_pipeline
 
+    if executor not in EXECUTORS:
+        raise ExecutorError(f"--executor {executor}: choose one of {', '.join(EXECUTORS)}")
     store = store or out_dir / "artifacts"
+    if executor == "ray":
+        # absolute paths: a Ray worker need not share this process's working directory
+        return _run_cells_ray(cells, Path(out_dir).resolve(), console, jobs, Path(store).resolve(), ray_address, cpus_per_cell)
     status: dict[str, str] = {}
     if jobs <= 1:
         for i, (cell, resolved) in enumerate(cells, 1):
@@ -134,17 +269,10 @@ def run_cells(
 
     def one(item: tuple[Cell, Any]) -> tuple[str, str]:
         cell, resolved = item
-        cell_dir = out_dir / cell.name
-        cell_dir.mkdir(parents=True, exist_ok=True)
-        spec_file = cell_dir / "cell.yaml"
-        spec_file.write_text(resolved.to_yaml())
+        cell_dir, spec_file = _write_cell_spec(cell, resolved, out_dir)
         with (cell_dir / "run.log").open("w") as log:
-            proc = subprocess.run(
-                [sys.executable, "-m", "mocap.cli", "run", str(spec_file), "--out", str(cell_dir), "--store", str(store)],
-                stdout=log,
-                stderr=subprocess.STDOUT,
-            )
-        return cell.name, "done" if proc.returncode == 0 else f"failed (exit {proc.returncode}; see {cell_dir / 'run.log'})"
+            proc = subprocess.run(cell_command(spec_file, cell_dir, store), check=False, stdout=log, stderr=subprocess.STDOUT)
+        return cell.name, _outcome(proc.returncode, cell_dir)
 
     with ThreadPoolExecutor(max_workers=jobs) as pool:
         for name, result in pool.map(one, cells):
@@ -259,4 +387,4 @@ def render(summary: dict[str, dict[str, dict[str, float]]]) -> str:
     return "\n".join(lines) + "\n"
 
 
-__all__ = ["Cell", "comparison", "expand", "load_cells", "render", "run_cells"]
+__all__ = ["EXECUTORS", "RAY_MISSING", "Cell", "ExecutorError", "cell_command", "comparison", "expand", "import_ray", "load_cells", "render", "run_cells"]
