@@ -647,6 +647,15 @@ def build_evaluation_target(
 
 @hookimpl
 def register_commands(app):  # type: ignore[no-untyped-def]
+    @app.command("report")
+    def report_cmd(
+        run_dir: Annotated[Path, typer.Argument(help="a run directory (runs/<name> or runs/<name>/<cell>) or a comparison directory")],
+    ) -> None:
+        """Rewrite report.md (learning curves, metrics, per-clip tables, videos) of a run, or comparison.md of a comparison."""
+        from mocap.report import report_command
+
+        report_command(run_dir)
+
     @app.command("eval")
     def eval_command(
         target: Annotated[

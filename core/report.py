@@ -292,3 +292,53 @@ def write_comparison_plots(
         fig.savefig(path, format="png")
         written.append(path)
     return written
+
+
+# ------------------------------------------------------------------------------ mocap report
+def rebuild_report(run_dir: Path) -> list[Path]:
+    """Rewrite the reports of ``run_dir`` from what it holds: ``report.md`` (+ learning curves) of a
+    run directory (``spec.yaml`` + ``stages.json``), and ``comparison.md`` (+ plots) of a comparison
+    directory (``comparison.json``: its cells' runs are below it). Returns the files written."""
+    from mocap.cli import UserError
+
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise UserError(f"{run_dir}: not a directory (give a run directory, e.g. runs/<name> or runs/<name>/<cell>)")
+    written: list[Path] = []
+    comparison_file = run_dir / "comparison.json"
+    if comparison_file.is_file():
+        from mocap.matrix import Cell, comparison
+
+        data = json.loads(comparison_file.read_text(encoding="utf-8"))
+        cells = [Cell(name, dict(row.get("labels") or {}), {}) for name, row in data.get("cells", {}).items()]
+        for cell in cells:
+            if (run_dir / cell.name / "stages.json").is_file():
+                written += rebuild_report(run_dir / cell.name)
+        comparison(cells, run_dir)
+        written.append(run_dir / "comparison.md")
+    elif (run_dir / "stages.json").is_file() and (run_dir / "spec.yaml").is_file():
+        from mocap.interfaces import StageResult
+        from mocap.pipeline import StageRecord
+        from mocap.plugins import get_plugins
+        from mocap.spec import load_spec
+
+        resolved = load_spec(run_dir / "spec.yaml", get_plugins())
+        records = []
+        for s in json.loads((run_dir / "stages.json").read_text(encoding="utf-8")):
+            ckpt = s.get("checkpoint")
+            result = StageResult(checkpoint=Path(ckpt) if ckpt else None, metrics=dict(s.get("metrics") or {}))
+            records.append(
+                StageRecord(s["stage"], s.get("key", ""), Path(s.get("artifact_dir", "")), result, bool(s.get("reused")), float(s.get("seconds", 0.0)))
+            )
+        written.append(write_report(run_dir, resolved, records, wall_seconds=sum(r.seconds for r in records)))
+    else:
+        raise UserError(f"{run_dir}: neither a run directory (spec.yaml + stages.json) nor a comparison (comparison.json)")
+    return written
+
+
+def report_command(
+    run_dir: Path,
+) -> None:
+    """Rewrite report.md (and its plots) of a run directory, or comparison.md of a comparison."""
+    for path in rebuild_report(run_dir):
+        print(f"wrote {path}")

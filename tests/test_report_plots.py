@@ -111,6 +111,17 @@ def test_run_report_embeds_its_learning_curves(tmp_path: Path, monkeypatch):
     assert _is_png(run / "learning_curves.png")
     report_md = (run / "report.md").read_text()
     assert "## Learning curves" in report_md and "![learning curves](learning_curves.png)" in report_md
+    # `mocap report RUN` rewrites it from the run directory alone
+    (run / "report.md").unlink()
+    (run / "learning_curves.png").unlink()
+    with use_plugins(("toy", toy)):
+        again = invoke(["report", run])
+    assert again.exit_code == 0, again.output
+    assert "## Stages" in (run / "report.md").read_text() and "| imitator |" in (run / "report.md").read_text()
+    assert "![learning curves](learning_curves.png)" in (run / "report.md").read_text() and _is_png(run / "learning_curves.png")
+    with use_plugins(("toy", toy)):
+        bad = invoke(["report", tmp_path / "nothing"])
+    assert bad.exit_code == 2 and "not a directory" in (bad.output + (bad.stderr or ""))
 
 
 def test_report_says_when_matplotlib_is_missing(tmp_path: Path, monkeypatch):
