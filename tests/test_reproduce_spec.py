@@ -18,9 +18,10 @@ SPEC = ROOT / "specs" / "reproduce" / "bundled.yaml"
 def test_reproduce_spec_trains_everything_and_shares_the_imitator():
     plugins = get_plugins()
     cells = {cell.name: resolved for cell, resolved in load_cells(SPEC, plugins)}
-    assert set(cells) == {"latent-none", "latent-pulse", "latent-hybrid_rvq"}
+    assert set(cells) == {"latent-none", "latent-pulse", "latent-hybrid_rvq", "latent-vmp"}
     committed = {p.parent.name for p in (ROOT / "checkpoints").glob("*/*.pt")}
-    covered = {"imitator_amp"} | {f"{r.spec.latent.name}_amp" for r in cells.values() if r.spec.latent is not None}
+    latents = {f"{r.spec.latent.name}_amp" for r in cells.values() if r.spec.latent is not None}
+    covered = {"imitator_amp", "imitator_amp_v2"} | latents  # _v2: the same recipe trained further
     assert committed <= covered, f"committed checkpoints without a cell: {committed - covered}"
     keys = {name: stage_keys(r.spec) for name, r in cells.items()}
     assert len({k["imitator"] for k in keys.values()}) == 1  # one imitator artifact for all cells
