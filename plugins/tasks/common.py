@@ -21,6 +21,7 @@ from torch import Tensor
 
 __all__ = [
     "FallParams",
+    "GoalBookkeeping",
     "MetricSums",
     "TaskBase",
     "angle_between_2d",
@@ -238,3 +239,42 @@ def angle_between_2d(a: Tensor, b: Tensor) -> Tensor:
     cross = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
     dot = (a * b).sum(-1)
     return torch.atan2(cross, dot).abs()
+
+
+class GoalBookkeeping:
+    """Per-goal metrics shared by the goal-reaching tasks (``reach``, ``point_goal``): how many goals
+    ended, the share reached, the mean time to reach and the mean final distance.
+
+    The task keeps ``goal_steps`` (steps since the goal was set), ``reached_step`` (-1 until reached)
+    and ``last_distance`` up to date and calls :meth:`_finish_goals` when goals end."""
+
+    dt: float
+
+    def _init_goals(self, num_envs: int, device: Any) -> None:
+        self.goal_steps = torch.zeros(num_envs, dtype=torch.long, device=device)
+        self.reached_step = torch.full((num_envs,), -1, dtype=torch.long, device=device)
+        self.last_distance = torch.zeros(num_envs, dtype=torch.float64, device=device)
+        self._goal_stats = {"goals": 0.0, "reached": 0.0, "time": 0.0, "final": 0.0}
+
+    def _finish_goals(self, ids: Tensor) -> None:
+        ids = ids[self.goal_steps[ids] > 0]
+        if ids.numel() == 0:
+            return
+        reached = self.reached_step[ids] >= 0
+        g = self._goal_stats
+        g["goals"] += float(ids.numel())
+        g["reached"] += float(reached.sum())
+        g["time"] += float(self.reached_step[ids][reached].double().sum()) * self.dt
+        g["final"] += float(self.last_distance[ids].sum())
+
+    def _pop_goal_metrics(self, out: dict[str, float]) -> dict[str, float]:
+        """Add the goal metrics since the last call to ``out`` and reset them."""
+        g = self._goal_stats
+        if g["goals"] > 0:
+            out["goals"] = g["goals"]
+            out["success_rate"] = g["reached"] / g["goals"]
+            out["final_distance"] = g["final"] / g["goals"]
+            if g["reached"] > 0:
+                out["time_to_reach"] = g["time"] / g["reached"]
+        self._goal_stats = {k: 0.0 for k in g}
+        return out

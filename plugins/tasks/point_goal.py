@@ -48,7 +48,7 @@ from mocap.interfaces import Task
 from mocap.observations import world_to_heading
 from mocap.skeleton import Skeleton
 from mocap.state import SimState
-from mocap_tasks.common import FallParams, TaskBase, horizontal_unit, resolve_body, rows
+from mocap_tasks.common import FallParams, GoalBookkeeping, TaskBase, horizontal_unit, resolve_body, rows
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 from torch import Tensor
 
@@ -117,7 +117,7 @@ def point_goal_reward(
     return torch.where(dist2 <= arrive_radius**2, torch.ones_like(r), r)
 
 
-class PointGoalTask(TaskBase, Task):
+class PointGoalTask(GoalBookkeeping, TaskBase, Task):
     """The ``point_goal`` task (module docstring). Goal: :attr:`target` (N, 2) world xy."""
 
     goal_dim = 2
@@ -132,23 +132,9 @@ class PointGoalTask(TaskBase, Task):
         N, dev, f64 = self.num_envs, self.device, torch.float64
         self.target = torch.zeros(N, 2, dtype=f64, device=dev)
         self.anchor_xy = torch.zeros(N, 2, dtype=f64, device=dev)
-        self.goal_steps = torch.zeros(N, dtype=torch.long, device=dev)
-        self.reached_step = torch.full((N,), -1, dtype=torch.long, device=dev)
-        self.last_distance = torch.zeros(N, dtype=f64, device=dev)
-        self._goal_stats = {"goals": 0.0, "reached": 0.0, "time": 0.0, "final": 0.0}
+        self._init_goals(N, dev)
 
     # ------------------------------------------------------------------------------ goals
-    def _finish_goals(self, ids: Tensor) -> None:
-        ids = ids[self.goal_steps[ids] > 0]
-        if ids.numel() == 0:
-            return
-        reached = self.reached_step[ids] >= 0
-        g = self._goal_stats
-        g["goals"] += float(ids.numel())
-        g["reached"] += float(reached.sum())
-        g["time"] += float(self.reached_step[ids][reached].double().sum()) * self.dt
-        g["final"] += float(self.last_distance[ids].sum())
-
     def _sample(self, ids: Tensor) -> None:
         k = int(ids.numel())
         u = self._rand(k, 2)
@@ -217,16 +203,7 @@ class PointGoalTask(TaskBase, Task):
         return fell if mode == "fall" else fell | head_low
 
     def metrics(self) -> dict[str, float]:
-        out = self._sums.pop(totals=("steps",))
-        g = self._goal_stats
-        if g["goals"] > 0:
-            out["goals"] = g["goals"]
-            out["success_rate"] = g["reached"] / g["goals"]
-            out["final_distance"] = g["final"] / g["goals"]
-            if g["reached"] > 0:
-                out["time_to_reach"] = g["time"] / g["reached"]
-        self._goal_stats = {k: 0.0 for k in g}
-        return out
+        return self._pop_goal_metrics(self._sums.pop(totals=("steps",)))
 
 
 def make_point_goal(

@@ -46,7 +46,7 @@ from mocap.interfaces import Task
 from mocap.observations import world_to_heading
 from mocap.skeleton import Skeleton
 from mocap.state import SimState
-from mocap_tasks.common import FallParams, TaskBase, resolve_body, rows
+from mocap_tasks.common import FallParams, GoalBookkeeping, TaskBase, resolve_body, rows
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 from torch import Tensor
 
@@ -118,7 +118,7 @@ def reach_reward(hand_pos: Tensor, target: Tensor, coefficient: float = 5.0) -> 
     return torch.exp(-coefficient * (diff * diff).sum(-1))
 
 
-class ReachTask(TaskBase, Task):
+class ReachTask(GoalBookkeeping, TaskBase, Task):
     """The ``reach`` task (module docstring). Goal: :attr:`target` (N, 3) world points."""
 
     goal_dim = 3
@@ -150,23 +150,9 @@ class ReachTask(TaskBase, Task):
             (N,), params.change_steps[0], dtype=torch.long, device=dev
         )
         # per-goal bookkeeping for the metrics
-        self.goal_steps = torch.zeros(N, dtype=torch.long, device=dev)
-        self.reached_step = torch.full((N,), -1, dtype=torch.long, device=dev)
-        self.last_distance = torch.zeros(N, dtype=f64, device=dev)
-        self._goal_stats = {"goals": 0.0, "reached": 0.0, "time": 0.0, "final": 0.0}
+        self._init_goals(N, dev)
 
     # ------------------------------------------------------------------------------ goals
-    def _finish_goals(self, ids: Tensor) -> None:
-        ids = ids[self.goal_steps[ids] > 0]
-        if ids.numel() == 0:
-            return
-        reached = self.reached_step[ids] >= 0
-        g = self._goal_stats
-        g["goals"] += float(ids.numel())
-        g["reached"] += float(reached.sum())
-        g["time"] += float(self.reached_step[ids][reached].double().sum()) * self.dt
-        g["final"] += float(self.last_distance[ids].sum())
-
     def _sample(self, ids: Tensor, root_xy: Tensor | None) -> None:
         p = self.params
         k = int(ids.numel())
@@ -234,16 +220,7 @@ class ReachTask(TaskBase, Task):
         return self._fallen(state)
 
     def metrics(self) -> dict[str, float]:
-        out = self._sums.pop(totals=("steps",))
-        g = self._goal_stats
-        if g["goals"] > 0:
-            out["goals"] = g["goals"]
-            out["success_rate"] = g["reached"] / g["goals"]
-            out["final_distance"] = g["final"] / g["goals"]
-            if g["reached"] > 0:
-                out["time_to_reach"] = g["time"] / g["reached"]
-        self._goal_stats = {k: 0.0 for k in g}
-        return out
+        return self._pop_goal_metrics(self._sums.pop(totals=("steps",)))
 
 
 def make_reach(
