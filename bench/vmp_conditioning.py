@@ -21,8 +21,12 @@ from pathlib import Path
 
 def evaluate(target: Path) -> dict:
     import torch
-
-    from mocap.evaluation import ImitationEvalParams, build_evaluation_target, evaluate_imitator, load_evaluation_target
+    from mocap.evaluation import (
+        ImitationEvalParams,
+        build_evaluation_target,
+        evaluate_imitator,
+        load_evaluation_target,
+    )
     from mocap.metrics import default_metrics
     from mocap.plugins import get_plugins
     from mocap_vmp.metrics import JointMAE

@@ -17,11 +17,11 @@ from __future__ import annotations
 
 from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field
-
 from mocap.evaluation import ImitationEval, ImitationEvalParams
 from mocap.generation import GenerationEval, GenerationParams
 from mocap.interfaces import StageResult, Trainer
+from pydantic import BaseModel, ConfigDict, Field
+
 
 class EvalSuiteParams(BaseModel):
     model_config = ConfigDict(extra="forbid")

@@ -27,9 +27,8 @@ import math
 from typing import Any, Callable
 
 import torch
-from pydantic import BaseModel, ConfigDict, Field
-
 from mocap_phc.recovery import FailStateParams, generate_fall_states, moved
+from pydantic import BaseModel, ConfigDict, Field
 
 PROTOCOL = "mocap-recovery-v1"
 
@@ -109,7 +108,7 @@ def evaluate_recovery(
         start = moved(fallen, shift.to(fallen.root_pos))
         sim.reset(torch.arange(n), start)
         state = sim.state
-        steps = int(round(p.seconds / dt))
+        steps = round(p.seconds / dt)
         errs, roots = [], []
 
         def measure(state: Any, ref: Any) -> None:

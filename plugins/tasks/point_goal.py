@@ -48,7 +48,14 @@ from mocap.interfaces import Task
 from mocap.observations import world_to_heading
 from mocap.skeleton import Skeleton
 from mocap.state import SimState
-from mocap_tasks.common import FallParams, GoalBookkeeping, TaskBase, horizontal_unit, resolve_body, rows
+from mocap_tasks.common import (
+    FallParams,
+    GoalBookkeeping,
+    TaskBase,
+    horizontal_unit,
+    resolve_body,
+    rows,
+)
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 from torch import Tensor
 

@@ -97,6 +97,14 @@ from mocap.rotations import (
 )
 from mocap.skeleton import Skeleton
 from mocap.state import HumanoidState, SimState, Trajectories
+from mocap_phc.rewards import (
+    DEFAULT_SCALES,
+    DEFAULT_WEIGHTS,
+    TERMS,
+    ImitationReward,
+    RewardForm,
+    imitation_errors,
+)
 from mocap_tasks.common import FallParams, TaskBase, resolve_body
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 from torch import Tensor
@@ -128,14 +136,12 @@ LEFT_HAND_NAMES: tuple[str, ...] = ("left_hand", "L_Hand")
 RIGHT_HAND_NAMES: tuple[str, ...] = ("right_hand", "R_Hand")
 
 #: PHC imitation reward: (position, rotation, linear velocity, angular velocity)
-PHC_WEIGHTS: tuple[float, float, float, float] = (0.5, 0.3, 0.1, 0.1)
-PHC_SCALES: tuple[float, float, float, float] = (100.0, 10.0, 0.1, 0.1)
+PHC_WEIGHTS: tuple[float, float, float, float] = DEFAULT_WEIGHTS
+PHC_SCALES: tuple[float, float, float, float] = DEFAULT_SCALES
 #: Hybrid HMD head reward [DEFAULT of the digest]: (position, rotation, linear velocity, angular velocity)
 HMD_WEIGHTS: tuple[float, float, float, float] = (0.4, 0.3, 0.15, 0.15)
 HMD_SCALES: tuple[float, float, float, float] = (40.0, 2.0, 0.5, 0.1)
 
-RewardForm = Literal["paper", "code"]
-TERMS: tuple[str, ...] = ("pos", "rot", "vel", "ang_vel")
 
 
 # ------------------------------------------------------------------------------ pure functions
@@ -157,28 +163,6 @@ def select_bodies(state: HumanoidState, bodies: Sequence[int] | Tensor) -> Human
     )
 
 
-def imitation_errors(sim: HumanoidState, ref: HumanoidState, form: RewardForm = "paper") -> dict[str, Tensor]:
-    """(N,) errors of PHC's four imitation terms over all bodies of ``sim``/``ref``.
-
-    ``"paper"``: mean over bodies of the per-body Euclidean norm (rotation: of the angle of
-    ``q^ q^-1``); ``"code"``: mean of the squared components (rotation: of the squared angle)."""
-    angle = quat_angle(quat_mul(ref.body_rot, quat_conjugate(sim.body_rot)))  # (N, B)
-    diffs = {
-        "pos": ref.body_pos - sim.body_pos,
-        "vel": ref.body_lin_vel - sim.body_lin_vel,
-        "ang_vel": ref.body_ang_vel - sim.body_ang_vel,
-    }
-    if form == "paper":
-        out = {k: torch.linalg.vector_norm(v, dim=-1).mean(-1) for k, v in diffs.items()}
-        out["rot"] = angle.mean(-1)
-    elif form == "code":
-        out = {k: v.square().mean(dim=(-1, -2)) for k, v in diffs.items()}
-        out["rot"] = angle.square().mean(-1)
-    else:
-        raise ValueError(f"unknown reward form {form!r}; choose 'paper' or 'code'")
-    return out
-
-
 def imitation_reward(
     sim: HumanoidState,
     ref: HumanoidState,
@@ -186,11 +170,9 @@ def imitation_reward(
     weights: Sequence[float] = PHC_WEIGHTS,
     scales: Sequence[float] = PHC_SCALES,
 ) -> tuple[Tensor, dict[str, Tensor]]:
-    """PHC's ``r^g-imitation = sum_i w_i exp(-k_i e_i)`` (module doc): ``(reward (N,), terms)``."""
-    errors = imitation_errors(sim, ref, form)
-    terms = {name: torch.exp(-k * errors[name]) for name, k in zip(TERMS, scales)}
-    total = sum(w * terms[name] for name, w in zip(TERMS, weights))
-    return total, terms  # type: ignore[return-value]
+    """PHC's ``r^g-imitation = sum_i w_i exp(-k_i e_i)`` over all bodies of ``sim``/``ref`` (the
+    imitator's :class:`mocap_phc.rewards.ImitationReward`): ``(reward (N,), terms)``."""
+    return ImitationReward(form, tuple(weights), tuple(scales))(sim, ref)  # type: ignore[arg-type]
 
 
 def _head_rows(state: HumanoidState, head: int) -> tuple[Tensor, Tensor, Tensor, Tensor]:
