@@ -215,8 +215,6 @@ def evaluate_generation(
 
     def observe(state: Any, ref: Any) -> Observations:
         if imitator is None:  # a latent that decodes to PD targets on its own (VMP): plain proprioception
-            from mocap.observations import proprioception
-
             return Observations(proprio=proprioception(state, sixd).float(), goal=None, extra={})
         return _reference_free(imitator.observe(state, ref))
 
