@@ -1,0 +1,195 @@
+"""Downstream tasks through each latent space: normalized-return curves and final task metrics.
+
+Trains the shipped per-pairing specs ``specs/tasks/<task>_<latent>.yaml`` (the same PPO task policy
+acting on PD targets for ``scratch``, or through a frozen, committed latent space) with one budget
+and a list of seeds, then collects every cell's learning curve from its ``metrics.jsonl``:
+
+    python bench/task_compare.py run --tasks speed reach strike \\
+        --latents scratch pulse hybrid_rvq vmp --seeds 0 --steps 500000 --out /tmp/task-compare
+    python bench/task_compare.py collect --out /tmp/task-compare --json bench/results/task_compare
+
+``run`` is resumable: a finished cell is reused by the pipeline, an interrupted one resumes from
+its checkpoint; cells run in seed-major order, so an early stop still leaves every pairing with
+seed 0. ``collect`` writes ``<json>.json`` (per cell: the curve of ``episode/normalized_return``,
+episode length and every ``eval/*`` task metric, binned to 20 points, plus the final values, i.e.
+the mean over the last 10% of iterations) and ``<json>.png`` (one panel per task, one line per
+latent space, a band over seeds when there are several).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+CURVE_KEYS = ("episode/normalized_return", "episode/length", "episode/success")
+
+
+def cell_name(task: str, latent: str, seed: int) -> str:
+    return f"{task}_{latent}_s{seed}"
+
+
+def run(args: argparse.Namespace) -> int:
+    args.out.mkdir(parents=True, exist_ok=True)
+    cells = [(t, l, s) for s in args.seeds for t in args.tasks for l in args.latents]
+    missing = [ROOT / "specs" / "tasks" / f"{t}_{l}.yaml" for t, l, _ in cells]
+    missing = [p for p in missing if not p.is_file()]
+    if missing:
+        print("error: no spec " + ", ".join(str(p.relative_to(ROOT)) for p in missing), file=sys.stderr)
+        return 2
+    for i, (task, latent, seed) in enumerate(cells, 1):
+        name = cell_name(task, latent, seed)
+        cell_dir = args.out / name
+        if (cell_dir / "stages.json").is_file() and _finished(cell_dir, args.steps):
+            print(f"[{i}/{len(cells)}] {name}: done")
+            continue
+        cmd = [
+            sys.executable, "-m", "mocap", "run", str(ROOT / "specs" / "tasks" / f"{task}_{latent}.yaml"),
+            "--set", f"task.trainer.params.total_env_steps={args.steps}",
+            "--set", f"seed={seed}",
+            "--out", str(cell_dir), "--store", str(args.out / "artifacts"),
+        ]  # fmt: skip
+        print(f"[{i}/{len(cells)}] {name}: training {args.steps:,} env steps", flush=True)
+        t0 = time.time()
+        with open(args.out / f"{name}.log", "a") as log:
+            rc = subprocess.call(cmd, stdout=log, stderr=subprocess.STDOUT, cwd=ROOT)
+        print(f"[{i}/{len(cells)}] {name}: exit {rc} after {time.time() - t0:.0f} s", flush=True)
+        if rc != 0:
+            return rc
+    return 0
+
+
+def _finished(cell_dir: Path, steps: int) -> bool:
+    rows = _rows(cell_dir)
+    return bool(rows) and rows[-1].get("env_steps", 0) >= steps
+
+
+def _rows(cell_dir: Path) -> list[dict]:
+    path = cell_dir / "metrics.jsonl"
+    if not path.is_file():
+        return []
+    rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    return [r for r in rows if r.get("stage") == "task" and "env_steps" in r]
+
+
+def summarize(rows: list[dict], bins: int = 20) -> dict:
+    """Binned curve (mean of each metric within equal env-step bins) and final values (last 10%)."""
+    keys = [k for k in CURVE_KEYS if any(k in r for r in rows)]
+    keys += sorted({k for r in rows for k in r if k.startswith("eval/")})
+    top = max(r["env_steps"] for r in rows)
+    curve = []
+    for b in range(bins):
+        lo, hi = top * b / bins, top * (b + 1) / bins
+        sel = [r for r in rows if lo < r["env_steps"] <= hi]
+        if not sel:
+            continue
+        point = {"env_steps": max(r["env_steps"] for r in sel)}
+        for k in keys:
+            vals = [r[k] for r in sel if r.get(k) is not None]
+            if vals:
+                point[k] = sum(vals) / len(vals)
+        curve.append(point)
+    tail = rows[-max(1, len(rows) // 10) :]
+    final = {"env_steps": top}
+    for k in keys:
+        vals = [r[k] for r in tail if r.get(k) is not None]
+        if vals:
+            final[k] = sum(vals) / len(vals)
+    wall = rows[-1]["time"] - rows[0]["time"] if len(rows) > 1 else 0.0
+    return {"curve": curve, "final": final, "wall_s": round(wall, 1)}
+
+
+def collect(args: argparse.Namespace) -> int:
+    cells = {}
+    for cell_dir in sorted(p for p in args.out.iterdir() if p.is_dir() and p.name != "artifacts"):
+        rows = _rows(cell_dir)
+        if not rows:
+            continue
+        task, rest = cell_dir.name.split("_", 1)
+        latent, seed = rest.rsplit("_s", 1)
+        cells[cell_dir.name] = {"task": task, "latent": latent, "seed": int(seed), **summarize(rows)}
+    if not cells:
+        print(f"error: no finished cells under {args.out}", file=sys.stderr)
+        return 2
+    groups: dict[str, dict] = {}
+    for c in cells.values():
+        g = groups.setdefault(f"{c['task']}/{c['latent']}", {"seeds": [], "final": {}})
+        g["seeds"].append(c["seed"])
+        for k, v in c["final"].items():
+            g["final"].setdefault(k, []).append(v)
+    for g in groups.values():
+        g["final"] = {k: {"mean": sum(v) / len(v), "std": _std(v), "n": len(v)} for k, v in g["final"].items()}
+    out = {"command": " ".join(["python", "bench/task_compare.py", *sys.argv[1:]]), "groups": groups, "cells": cells}
+    args.json.parent.mkdir(parents=True, exist_ok=True)
+    args.json.with_suffix(".json").write_text(json.dumps(out, indent=1) + "\n")
+    _plot(cells, args.json.with_suffix(".png"))
+    for name, g in sorted(groups.items()):
+        f = g["final"]
+        nr = f.get("episode/normalized_return", {})
+        ln = f.get("episode/length", {})
+        print(f"{name:24s} seeds {len(g['seeds'])}  normalized return {nr.get('mean', float('nan')):.3f} ± {nr.get('std', 0):.3f}  length {ln.get('mean', float('nan')):.1f}")
+    return 0
+
+
+def _std(v: list[float]) -> float:
+    if len(v) < 2:
+        return 0.0
+    m = sum(v) / len(v)
+    return (sum((x - m) ** 2 for x in v) / (len(v) - 1)) ** 0.5
+
+
+def _plot(cells: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    tasks = sorted({c["task"] for c in cells.values()})
+    latents = sorted({c["latent"] for c in cells.values()})
+    fig, axes = plt.subplots(2, len(tasks), figsize=(5 * len(tasks), 7), squeeze=False)
+    for col, task in enumerate(tasks):
+        for latent in latents:
+            runs = [c for c in cells.values() if c["task"] == task and c["latent"] == latent]
+            if not runs:
+                continue
+            for row, key in enumerate(("episode/normalized_return", "episode/length")):
+                n = min(len(r["curve"]) for r in runs)
+                x = np.array([runs[0]["curve"][i]["env_steps"] for i in range(n)]) / 1e6
+                y = np.array([[r["curve"][i].get(key, np.nan) for i in range(n)] for r in runs])
+                ax = axes[row][col]
+                (line,) = ax.plot(x, np.nanmean(y, 0), label=f"{latent} ({len(runs)} seed{'s' * (len(runs) > 1)})")
+                if len(runs) > 1:
+                    ax.fill_between(x, np.nanmin(y, 0), np.nanmax(y, 0), color=line.get_color(), alpha=0.2)
+        axes[0][col].set_title(task)
+        axes[0][col].set_ylabel("normalized return (training episodes)")
+        axes[1][col].set_ylabel("episode length (steps)")
+        for row in range(2):
+            axes[row][col].set_xlabel("env steps (M)")
+            axes[row][col].legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("run", help="train every task x latent x seed cell")
+    p.add_argument("--tasks", nargs="+", default=["speed", "reach", "strike"])
+    p.add_argument("--latents", nargs="+", default=["scratch", "pulse", "hybrid_rvq", "vmp"])
+    p.add_argument("--seeds", nargs="+", type=int, default=[0])
+    p.add_argument("--steps", type=int, default=500_000)
+    p.add_argument("--out", type=Path, required=True)
+    c = sub.add_parser("collect", help="gather curves and final metrics into JSON and a plot")
+    c.add_argument("--out", type=Path, required=True)
+    c.add_argument("--json", type=Path, default=Path("bench/results/task_compare"))
+    args = parser.parse_args(argv)
+    return run(args) if args.command == "run" else collect(args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
