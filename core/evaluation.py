@@ -69,11 +69,13 @@ def rollout_imitation(
     threshold: float,
     recorder: Any = None,
     progress: Any = None,
+    observed: MotionLibrary | None = None,
 ) -> Rollout:
     """Roll ``imitator`` out in ``sim`` (N = len(clip_ids) envs) for ``frames`` (N,) control steps each.
 
     Frame 0 is the reset state; frame k the state after k steps, compared with the reference at
-    time k * dt.
+    time k * dt. ``observed``: a library of the same clips the policy sees instead of ``lib``
+    (noisy references, :mod:`mocap.noisy`); errors are still measured against ``lib``.
     """
     n = len(clip_ids)
     dt = sim.dt
@@ -93,8 +95,9 @@ def rollout_imitation(
     sim_pos[0], ref_pos[0], mask[0] = state.body_pos.float().cpu(), ref.body_pos.float().cpu(), True
     for k in range(1, T):
         ref = lib.frames(clip_ids, zeros + k * dt)
+        seen = ref if observed is None else observed.frames(clip_ids, zeros + k * dt)
         with torch.no_grad():
-            actions = imitator.act(imitator.observe(state, ref))
+            actions = imitator.act(imitator.observe(state, seen))
         state = sim.step(actions)
         sp, rp = state.body_pos.float().cpu(), ref.body_pos.float().cpu()
         sim_pos[k], ref_pos[k] = sp, rp
@@ -130,8 +133,12 @@ def evaluate_imitator(
     params: ImitationEvalParams,
     metrics: list[Metric] | None = None,
     console: Any = None,
+    observed: MotionLibrary | None = None,
 ) -> dict[str, Any]:
     """Run the evaluation protocol (module docstring) and return the result table.
+
+    ``observed``: what the policy sees instead of ``lib`` (the same clips, e.g. with estimator
+    noise: :mod:`mocap.noisy`); every metric is still measured against ``lib``.
 
     The table: ``protocol``, ``fps``, ``units``, ``aggregate`` (``success_rate`` in [0, 1],
     ``succeeded``, ``total``, every metric's mean over all clips, and ``<metric>_succ`` its mean
@@ -152,7 +159,7 @@ def evaluate_imitator(
             sim = make_sim(len(ids))
             dt = sim.dt
             frames = episode_frames(lib, ids, dt, p.horizon)
-            out = rollout_imitation(sim, lib, imitator, ids, frames, threshold=p.threshold)
+            out = rollout_imitation(sim, lib, imitator, ids, frames, threshold=p.threshold, observed=observed)
             sim.close()
             for m in metrics:
                 per_episode[m.name].append(m(out.traj).double())

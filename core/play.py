@@ -22,6 +22,9 @@ is rolled out by a :class:`Player`, which holds all the stepping logic and knows
 in one line and points to ``mocap render``. The command is registered by the ``mujoco`` simulator
 plugin next to ``mocap render`` (:mod:`mocap_sim_mujoco.commands`): the viewer is MuJoCo's.
 
+``mocap render RUN_DIR`` of a run with a trained ``task`` stage records the task policy acting through
+its latent space instead (:mod:`mocap.task_video`).
+
 ``mocap render TARGET --clip C`` writes the imitate rollout with
 :func:`mocap.evaluation.record_video` (the reference drawn as a ghost); ``--generate`` records a
 :class:`Player` rollout from the prior (same seed, same rollout as pressing ``G`` once in ``play``)
@@ -460,6 +463,11 @@ def render_policy(
         raise UserError(f"--out {str(out)!r}: the video must be a .mp4 or .gif file")
     if seconds is not None and not seconds > 0:
         raise UserError(f"--seconds must be positive, got {seconds:g}")
+    from mocap.task_video import render_task, task_stage
+
+    if task_stage(Path(target)) is not None and clip is None and not generate and not imitator_only:
+        # a run with a trained task stage: the task policy acting through its latent space
+        return render_task(Path(target), Path(out), seconds=seconds or 10.0, seed=seed, width=width, height=height)
     plugins = get_plugins()
     loaded = build_evaluation_target(load_evaluation_target(target, plugins), plugins, motions=motions, use_latent=not imitator_only)
     lib = loaded.library

@@ -197,6 +197,10 @@ class ReachTask(GoalBookkeeping, TaskBase, Task):
         rel = self.target.to(state.root_pos) - state.root_pos
         return world_to_heading(state.root_rot, rel)
 
+    def markers(self, env_id: int = 0) -> list[tuple[Any, tuple[float, ...], float]]:
+        """For videos: the hand target as a red sphere."""
+        return [(self.target[env_id].detach().cpu().double().numpy(), (0.9, 0.15, 0.15, 1.0), 0.05)]
+
     # ----------------------------------------------------------------------------- reward
     def hand_position(self, state: SimState) -> Tensor:
         return state.body_pos[:, self.body_index]

@@ -222,6 +222,14 @@ class SpeedTask(TaskBase, Task):
         local = world_to_heading(state.root_rot, d3)[:, :2]
         return torch.cat((local, self.target_speed.to(d)[:, None]), dim=-1)
 
+    def markers(self, env_id: int = 0) -> list[tuple[Any, tuple[float, ...], float]]:
+        """For videos: a green sphere 1 m ahead of the root along the target direction, its size
+        growing with the target speed."""
+        root = self.prev_root_pos[env_id].detach().cpu().double()
+        d = self.target_dir[env_id].detach().cpu().double()
+        pos = torch.stack((root[0] + d[0], root[1] + d[1], root.new_tensor(0.1)))
+        return [(pos.numpy(), (0.1, 0.8, 0.2, 1.0), 0.04 + 0.02 * float(self.target_speed[env_id]))]
+
     # ----------------------------------------------------------------------------- reward
     def root_velocity(self, state: SimState) -> Tensor:
         """(N, 2) horizontal root velocity used by the reward (``velocity`` switch)."""

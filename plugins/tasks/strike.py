@@ -344,6 +344,16 @@ class StrikeTask(TaskBase, Task):
         e["time"] += float(self.hit_step[ids][hit].double().sum()) * self.dt
         e["illegal"] += float(self.illegal[ids].sum())
 
+    def markers(self, env_id: int = 0) -> list[tuple[Any, tuple[float, ...], float]]:
+        """For videos (the humanoid-only recorder does not draw the box): the target's centre and the
+        centre of its top face; the top drops beside the centre when the target is knocked over."""
+        from mocap.rotations import quat_apply
+
+        t = self.target_state()
+        pos, rot = t.pos[env_id].detach().cpu().double(), t.rot[env_id].detach().cpu().double()
+        top = pos + quat_apply(rot, torch.tensor([0.0, 0.0, float(self.params.half_size[2])], dtype=torch.float64))
+        return [(pos.numpy(), (0.95, 0.55, 0.1, 1.0), 0.08), (top.numpy(), (0.95, 0.85, 0.1, 1.0), 0.06)]
+
     # ------------------------------------------------------------------------ observation
     def observe(self, state: SimState) -> Tensor:
         t = self.target_state()
