@@ -22,6 +22,11 @@ differences), which is what a consumer of an estimator's stream gets. A looping 
 clean cycle offset (the noisy last frame is the noisy first frame moved by the clean offset), so
 the ``--loop`` protocol does not drift because of one noisy frame.
 
+Consumer-side smoothing (``smooth``, off by default; not in PHC): a causal exponential filter of
+the delivered stream, as a live avatar would apply (:func:`smooth_clip`): ``p_k = p_(k-1) + a (x_k -
+p_(k-1))`` for the root position and ``q_k = slerp(q_(k-1), x_k, a)`` for every rotation, ``a`` in
+(0, 1] (1: no smoothing). It trades jitter for a lag of about ``(1 - a) / a`` frames.
+
 Protocol (:func:`evaluate_noisy`): for each level, the same imitation protocol as ``mocap eval``
 (:func:`mocap.evaluation.evaluate_imitator`: every clip once from its first frame, deterministic
 actions, failure when the mean body error exceeds 0.5 m) with the policy observing the noisy
@@ -109,13 +114,38 @@ def noisy_clip(clip: Any, level: NoiseLevel, rng: np.random.Generator) -> Any:
     return replace(clip, root_pos=root_pos[keep], root_rot=root_rot[keep], joint_rot=joint_rot[keep])
 
 
-def noisy_library(library: Any, level: NoiseLevel, seed: int) -> Any:
+def smooth_clip(clip: Any, alpha: float) -> Any:
+    """Causal exponential smoothing of ``clip`` (module docstring); ``alpha = 1`` returns it unchanged.
+
+    A looping clip's last frame stays its first frame moved by the cycle offset (the wrap)."""
+    if not 0 < alpha <= 1:
+        raise ValueError(f"smoothing alpha must be in (0, 1], got {alpha:g}")
+    if alpha == 1:
+        return clip
+    from mocap.rotations import quat_slerp
+
+    pos = clip.root_pos.copy()
+    root = torch.from_numpy(clip.root_rot).to(torch.float64).clone()
+    joints = torch.from_numpy(clip.joint_rot).to(torch.float64).clone()
+    for k in range(1, clip.num_frames):
+        pos[k] = pos[k - 1] + alpha * (clip.root_pos[k] - pos[k - 1])
+        root[k] = quat_slerp(root[k - 1], root[k], alpha)
+        joints[k] = quat_slerp(joints[k - 1], joints[k], alpha)
+    root_rot, joint_rot = root.numpy(), joints.numpy()
+    if clip.loop:
+        pos[-1] = pos[0] + (clip.root_pos[-1] - clip.root_pos[0])
+        root_rot[-1], joint_rot[-1] = root_rot[0], joint_rot[0]
+    return replace(clip, root_pos=pos, root_rot=root_rot, joint_rot=joint_rot)
+
+
+def noisy_library(library: Any, level: NoiseLevel, seed: int, smooth: float = 1.0) -> Any:
     """A :class:`~mocap.motion.library.MotionLibrary` of the noisy versions of ``library``'s clips
-    (same order, device, dtype and interpolation); ``seed`` fixes the noise."""
+    (same order, device, dtype and interpolation), smoothed by the consumer's filter when ``smooth``
+    is below 1; ``seed`` fixes the noise."""
     from mocap.motion.library import MotionLibrary
 
     rng = np.random.default_rng(seed)
-    clips = [noisy_clip(c, level, rng) for c in library.clips]
+    clips = [smooth_clip(noisy_clip(c, level, rng), smooth) for c in library.clips]
     return MotionLibrary(
         clips, library.skeleton, device=library.device, dtype=library.dtype,
         loop_heading=library.loop_heading, body_interp=library.body_interp,
@@ -131,6 +161,7 @@ def evaluate_noisy(
     seed: int = 0,
     num_envs: int = 64,
     horizon: float | None = None,
+    smooth: float = 1.0,
     console: Any = None,
 ) -> dict[str, Any]:
     """The protocol of the module docstring: one imitation-evaluation table per level.
@@ -145,7 +176,7 @@ def evaluate_noisy(
     rows = []
     for i, level in enumerate(levels):
         index = DEFAULT_LEVELS.index(level) if level in DEFAULT_LEVELS else len(DEFAULT_LEVELS) + i
-        observed = None if level.clean else noisy_library(library, level, seed + index)
+        observed = None if level.clean and smooth == 1 else noisy_library(library, level, seed + index, smooth)
         actor = policy if hasattr(policy, "act") else policy(observed if observed is not None else library)
         table = evaluate_imitator(actor, library, make_sim, params, default_metrics(), console, observed=observed)
         rows.append({"level": index if level in DEFAULT_LEVELS else f"custom {i}", "noise": level.model_dump(), "aggregate": table["aggregate"], "clips": table["clips"]})
@@ -153,6 +184,7 @@ def evaluate_noisy(
         "protocol": PROTOCOL,
         "imitation_protocol": table["protocol"],
         "seed": seed,
+        "smooth": smooth,
         "horizon": table["horizon"],
         "units": table["units"],
         "levels": rows,
@@ -163,7 +195,8 @@ def render_noisy(result: dict[str, Any]) -> Any:
     """A rich table: one row per level (noise, success, MPJPE-g/-l, PA-MPJPE, acceleration error)."""
     from rich.table import Table
 
-    out = Table(title=f"imitation from noisy references ({result['horizon']}; errors against the clean clip)")
+    filt = f"; consumer smoothing a = {result['smooth']:g}" if result.get("smooth", 1.0) != 1 else ""
+    out = Table(title=f"imitation from noisy references ({result['horizon']}; errors against the clean clip{filt})")
     for col in ("level", "joint °", "root °", "root cm", "dropped", "success", "MPJPE-g mm", "MPJPE-l mm", "PA-MPJPE mm", "acc err"):
         out.add_column(col, justify="right")
     for row in result["levels"]:
@@ -217,6 +250,9 @@ def register_commands(app: Any) -> None:
         ] = "0,1,2,3",
         seed: Annotated[int, typer.Option("--seed", help="seed of the noise (default level k uses seed + k)")] = 0,
         loop: Annotated[Optional[float], typer.Option("--loop", help="looping clips keep cycling for this many seconds")] = None,
+        smooth: Annotated[
+            float, typer.Option("--smooth", help="causal exponential smoothing of the stream, a in (0, 1] (1: none)")
+        ] = 1.0,
         num_envs: Annotated[int, typer.Option(help="clips simulated in parallel")] = 64,
         json_out: Annotated[Optional[Path], typer.Option("--json", help="write the result as JSON")] = None,
         imitator_only: Annotated[
@@ -232,7 +268,11 @@ def register_commands(app: Any) -> None:
         from mocap.evaluation import build_evaluation_target, load_evaluation_target
         from mocap.plugins import get_plugins
 
+        from mocap.cli import UserError
+
         chosen = parse_levels(levels)
+        if not 0 < smooth <= 1:
+            raise UserError(f"--smooth must be in (0, 1], got {smooth:g}")
         console = Console(stderr=True)
         plugins = get_plugins()
         info = load_evaluation_target(target, plugins)
@@ -243,7 +283,7 @@ def register_commands(app: Any) -> None:
             dt = float(probe.dt)
             probe.close()
             policy = lambda lib: loaded.latent.as_imitator(lib, dt=dt)  # noqa: E731 - bound to the clips it tracks
-        result = evaluate_noisy(policy, loaded.library, loaded.make_sim, chosen, seed=seed, num_envs=num_envs, horizon=loop, console=console)
+        result = evaluate_noisy(policy, loaded.library, loaded.make_sim, chosen, seed=seed, num_envs=num_envs, horizon=loop, smooth=smooth, console=console)
         result["evaluated"] = str(target)
         stdout = Console(width=None if sys.stdout.isatty() else 160)
         stdout.print(render_noisy(result))
@@ -253,4 +293,4 @@ def register_commands(app: Any) -> None:
             stdout.print(f"wrote {json_out}")
 
 
-__all__ = ["DEFAULT_LEVELS", "PROTOCOL", "NoiseLevel", "delivered_frames", "evaluate_noisy", "noisy_clip", "noisy_library", "parse_levels"]
+__all__ = ["DEFAULT_LEVELS", "PROTOCOL", "NoiseLevel", "delivered_frames", "evaluate_noisy", "noisy_clip", "noisy_library", "parse_levels", "smooth_clip"]

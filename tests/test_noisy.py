@@ -137,3 +137,50 @@ def test_eval_noisy_command(tmp_path: Path):
     assert "MPJPE-g" in result.stdout
     bad = invoke(["eval-noisy", spec, "--levels", "9"])
     assert bad.exit_code == 2 and "Traceback" not in bad.output and "level 9" in bad.stderr
+
+
+def _toy_clip(T: int, positions: np.ndarray, angles: np.ndarray, loop: bool = False):
+    """A clip with 2 bodies: root at ``positions`` (T, 3), the child rotated ``angles`` (T,) about z."""
+    from mocap.motion.clip import Clip
+
+    joint = np.zeros((T, 1, 4))
+    joint[:, 0, 0], joint[:, 0, 3] = np.cos(angles / 2), np.sin(angles / 2)
+    root = np.tile([1.0, 0.0, 0.0, 0.0], (T, 1))
+    return Clip("toy", "toy", 30.0, positions, root, joint, loop=loop)
+
+
+@given(st.floats(0.05, 1.0), st.integers(2, 40), st.floats(-2.5, 2.5))
+@settings(max_examples=40, deadline=None)
+def test_smoothing_is_the_exponential_filter(alpha, T, theta):
+    """A step from 0 to x at frame 1: after k frames the filter is at x (1 - (1 - a)^k), for the
+    root position and for a rotation about a fixed axis (slerp is linear in the angle there)."""
+    from mocap.noisy import smooth_clip
+
+    pos = np.zeros((T, 3))
+    pos[1:, 0] = 1.5
+    ang = np.zeros(T)
+    ang[1:] = theta
+    out = smooth_clip(_toy_clip(T, pos, ang), alpha)
+    k = np.arange(T)
+    expect = np.where(k == 0, 0.0, 1.0 - (1.0 - alpha) ** k)
+    assert np.allclose(out.root_pos[:, 0], 1.5 * expect, atol=1e-9)
+    got = 2 * np.arctan2(out.joint_rot[:, 0, 3], out.joint_rot[:, 0, 0])
+    assert np.allclose(got, theta * expect, atol=1e-6)
+
+
+def test_smoothing_keeps_constant_clips_and_the_loop_wrap():
+    from mocap.noisy import smooth_clip
+
+    T = 10
+    pos = np.tile([0.5, -0.2, 0.9], (T, 1))
+    const = smooth_clip(_toy_clip(T, pos, np.full(T, 0.7)), 0.3)
+    assert np.allclose(const.root_pos, pos) and np.allclose(2 * np.arctan2(const.joint_rot[:, 0, 3], const.joint_rot[:, 0, 0]), 0.7)
+    walk = pos.copy()
+    walk[:, 0] = np.linspace(0.0, 2.0, T)
+    looped = smooth_clip(_toy_clip(T, walk, np.zeros(T), loop=True), 0.3)
+    assert np.allclose(looped.root_pos[-1] - looped.root_pos[0], [2.0, 0.0, 0.0])
+    assert looped.root_pos[-2, 0] < walk[-2, 0]  # it lags behind the ramp
+    clip = _toy_clip(T, pos, np.zeros(T))
+    assert smooth_clip(clip, 1.0) is clip
+    with pytest.raises(ValueError):
+        smooth_clip(clip, 0.0)
