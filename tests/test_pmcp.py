@@ -366,3 +366,37 @@ def test_pmcp_recovery_needs_the_goal_switch(tmp_path):
     spec.write_text(RECOVERY_SPEC.replace(", recovery_goal: {form: paper}", ""))
     result = invoke(["run", spec, "--out", tmp_path / "runs" / "r"])
     assert result.exit_code != 0 and "recovery_goal" in (result.output + result.stderr)
+
+
+def test_pmcp_primitive0_from_a_trained_imitator(straight, tmp_path):
+    """`primitive0`: an existing policy becomes primitive 0 untrained (evaluated, frozen as 'given'),
+    primitive 1 starts from it on the clips it fails; a policy of other sizes is a clear error."""
+    from mocap.testing import invoke
+
+    root, final = straight
+    given = final.parent / "prim0" / "primitive.pt"
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(SPEC.replace("      primitive_env_steps: 320\n", f"      primitive_env_steps: 320\n      primitive0: {given}\n"))
+    result = invoke(["run", spec, "--out", tmp_path / "runs" / "g"])
+    assert result.exit_code == 0, result.output
+    stages = json.loads((tmp_path / "runs" / "g" / "stages.json").read_text())
+    workdir = Path(stages[0]["checkpoint"]).parent
+    state = json.loads((workdir / "pmcp_state.json").read_text())
+    p0 = state["primitives"][0]
+    assert p0["end"] == "given" and p0["env_steps"] == 0 and p0["source"] == str(given)
+    assert not (workdir / "prim0" / "ppo.pt").exists()  # not trained
+    a = load_checkpoint(workdir / "prim0" / "primitive.pt")["state_dict"]
+    b = load_checkpoint(given)["state_dict"]
+    tensors = [k for k in b if isinstance(b[k], torch.Tensor)]
+    assert tensors and all(torch.equal(a[k], b[k]) for k in tensors)
+    # the same policy, the same protocol: the same clips fail as in the run that trained it
+    ref = json.loads((final.parent / "pmcp_state.json").read_text())["primitives"][0]["evaluation"]
+    assert p0["evaluation"]["failed"] == ref["failed"]
+    if p0["evaluation"]["failed"]:
+        names = state["clip_names"]
+        assert [names[i] for i in state["primitives"][1]["clip_ids"]] == p0["evaluation"]["failed"]
+    # a policy with other hidden sizes
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(spec.read_text().replace("actor_hidden: [16], critic_hidden: [16], checkpoint_every: 2}", "actor_hidden: [8], critic_hidden: [16], checkpoint_every: 2}", 1))
+    result = invoke(["run", bad, "--out", tmp_path / "runs" / "b"])
+    assert result.exit_code != 0 and "does not fit this imitator" in result.output and "Traceback" not in result.output

@@ -135,6 +135,13 @@ class PMCPParams(BaseModel):
         description="env-step budget of one primitive (rounded up to whole PPO iterations); None: whatever is left of "
         "ppo.total_env_steps ([I])",
     )
+    primitive0: Path | None = Field(
+        None,
+        description="a trained single-primitive imitator (a policy.pt of this imitator's observation and action, the "
+        "network sizes of ppo) used as primitive 0: not trained, only evaluated on every clip to find the hard set of "
+        "primitive 1 ([I]; PHC+ on top of an existing PHC; [C] likewise starts PMCP from a trained imitator's checkpoint). "
+        "Relative to the spec file",
+    )
     max_primitives: int = Field(
         3, ge=1, description="most imitation primitives ([P] 3 imitation primitives + the recovery primitive; [C] num_prim 4)"
     )
@@ -675,10 +682,53 @@ class PMCPTrainer(Trainer):
         return StageResult(checkpoint=self.workdir / STATE_FILE, metrics={})
 
     # ---------------------------------------------------------------------------- primitives
+    def _given_primitive(self, state: dict[str, Any], prim: dict[str, Any]) -> None:
+        """Primitive 0 from ``primitive0``: checked against this imitator's sizes, copied into
+        ``prim0/``, evaluated on its clips and frozen (``end: given``)."""
+        from mocap.cli import UserError
+
+        p, ctx = self.params, self.ctx
+        assert p.primitive0 is not None
+        source = Path(p.primitive0)
+        if not source.is_file():
+            raise UserError(f"pmcp primitive0: {source} does not exist")
+        model = load_policy(source)
+        ids = list(prim["clip_ids"])
+        probe = self._imitation_env(ids[:1], 1, self._phase_seed(0))
+        try:
+            obs_dim, act_dim = int(probe.obs_dim), int(probe.action_space.shape[0])
+        finally:
+            probe.close()
+        expected = PPOTrainer(p.ppo).build_model(obs_dim, Box((act_dim,)))
+        got = {k: tuple(v.shape) for k, v in model.state_dict().items() if isinstance(v, Tensor)}
+        want = {k: tuple(v.shape) for k, v in expected.state_dict().items() if isinstance(v, Tensor)}
+        if got != want:
+            bad = sorted(k for k in set(got) | set(want) if got.get(k) != want.get(k))[:3]
+            raise UserError(
+                f"pmcp primitive0: {source} does not fit this imitator (observation {obs_dim}, actions {act_dim}, actor "
+                f"{list(p.ppo.actor_hidden)}, critic {list(p.ppo.critic_hidden)}); differing tensors: {', '.join(bad)}"
+            )
+        phase_dir = self.workdir / "prim0"
+        phase_dir.mkdir(parents=True, exist_ok=True)
+        save_policy(phase_dir / PRIMITIVE_NAME, model, extra={"trainer": "pmcp", "primitive": 0, "given": str(source)}, spec_yaml=ctx.spec_yaml())
+        model.eval()
+
+        def policy_fn(obs: Tensor) -> Tensor:
+            with torch.no_grad():
+                return model.mean_action(obs.float())
+
+        ev = self._evaluate(ids, policy_fn, self._phase_seed(0))
+        prim.update({"status": "frozen", "end": "given", "source": str(source), "iterations": 0, "env_steps": 0, "evaluation": ev, "evaluations": []})
+        self._save_state(state)
+        ctx.console.print(f"pmcp: primitive 0 given ({source}): success {ev['success_rate']:.2f} on its {len(ids)} clip(s)")
+
     def _train_primitive(self, state: dict[str, Any], prim: dict[str, Any]) -> bool:
         """Train primitive ``prim`` until it should be frozen; freeze it. False when stopped by the user."""
         p, ctx = self.params, self.ctx
         k, ids = int(prim["index"]), list(prim["clip_ids"])
+        if k == 0 and p.primitive0 is not None:
+            self._given_primitive(state, prim)
+            return True
         phase_dir = self.workdir / f"prim{k}"
         seed = self._phase_seed(k)
         holder: dict[str, PrimitiveEnv] = {}
