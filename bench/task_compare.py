@@ -12,8 +12,9 @@ and a list of seeds, then collects every cell's learning curve from its ``metric
 its checkpoint; cells run in seed-major order, so an early stop still leaves every pairing with
 seed 0. ``collect`` writes ``<json>.json`` (per cell: the curve of ``episode/normalized_return``,
 episode length and every ``eval/*`` task metric, binned to 20 points, plus the final values, i.e.
-the mean over the last 10% of iterations) and ``<json>.png`` (one panel per task, one line per
-latent space, a band over seeds when there are several).
+the mean over the last 10% of iterations), ``<json>.md`` (those final values per task as tables,
+mean ± std over seeds) and ``<json>.png`` (one panel per task, one line per latent space, a band
+over seeds when there are several).
 """
 
 from __future__ import annotations
@@ -68,6 +69,14 @@ def _finished(cell_dir: Path, steps: int) -> bool:
     return bool(rows) and rows[-1].get("env_steps", 0) >= steps
 
 
+def _task_done(cell_dir: Path) -> bool:
+    path = cell_dir / "stages.json"
+    try:
+        return any(s.get("stage") == "task" and s.get("checkpoint") for s in json.loads(path.read_text()))
+    except (OSError, ValueError):
+        return False
+
+
 def _rows(cell_dir: Path) -> list[dict]:
     path = cell_dir / "metrics.jsonl"
     if not path.is_file():
@@ -109,6 +118,9 @@ def collect(args: argparse.Namespace) -> int:
         rows = _rows(cell_dir)
         if not rows:
             continue
+        if not _task_done(cell_dir):
+            print(f"skipped {cell_dir.name}: its task stage has not finished")
+            continue
         task, rest = cell_dir.name.split("_", 1)
         latent, seed = rest.rsplit("_s", 1)
         cells[cell_dir.name] = {"task": task, "latent": latent, "seed": int(seed), **summarize(rows)}
@@ -127,12 +139,33 @@ def collect(args: argparse.Namespace) -> int:
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.with_suffix(".json").write_text(json.dumps(out, indent=1) + "\n")
     _plot(cells, args.json.with_suffix(".png"))
+    args.json.with_suffix(".md").write_text(render_markdown(groups))
     for name, g in sorted(groups.items()):
         f = g["final"]
         nr = f.get("episode/normalized_return", {})
         ln = f.get("episode/length", {})
         print(f"{name:24s} seeds {len(g['seeds'])}  normalized return {nr.get('mean', float('nan')):.3f} ± {nr.get('std', 0):.3f}  length {ln.get('mean', float('nan')):.1f}")
     return 0
+
+
+def render_markdown(groups: dict) -> str:
+    """One table per task: a row per latent space, final values as mean ± std over seeds."""
+    lines = ["# Task comparison: final values (mean over the last 10% of iterations; mean ± std over seeds)", ""]
+    tasks = sorted({name.split("/")[0] for name in groups})
+    for task in tasks:
+        rows = {name.split("/")[1]: g for name, g in sorted(groups.items()) if name.split("/")[0] == task}
+        keys = ["episode/normalized_return", "episode/length"]
+        keys += sorted({k for g in rows.values() for k in g["final"] if k.startswith("eval/") and k not in ("eval/steps",)})
+        lines += [f"## {task}", "", "| latent | seeds | " + " | ".join(k.split("/")[-1] for k in keys) + " |"]
+        lines.append("|---|---|" + "---|" * len(keys))
+        for latent, g in rows.items():
+            cells = []
+            for k in keys:
+                f = g["final"].get(k)
+                cells.append("-" if f is None else f"{f['mean']:.3g} ± {f['std']:.2g}" if f["n"] > 1 else f"{f['mean']:.3g}")
+            lines.append(f"| {latent} | {len(g['seeds'])} | " + " | ".join(cells) + " |")
+        lines.append("")
+    return "\n".join(lines)
 
 
 def _std(v: list[float]) -> float:
@@ -158,6 +191,8 @@ def _plot(cells: dict, path: Path) -> None:
             if not runs:
                 continue
             for row, key in enumerate(("episode/normalized_return", "episode/length")):
+                if not any(key in point for r in runs for point in r["curve"]):
+                    continue
                 n = min(len(r["curve"]) for r in runs)
                 x = np.array([runs[0]["curve"][i]["env_steps"] for i in range(n)]) / 1e6
                 y = np.array([[r["curve"][i].get(key, np.nan) for i in range(n)] for r in runs])
