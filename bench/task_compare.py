@@ -205,7 +205,8 @@ def _plot(cells: dict, path: Path) -> None:
         axes[1][col].set_ylabel("episode length (steps)")
         for row in range(2):
             axes[row][col].set_xlabel("env steps (M)")
-            axes[row][col].legend(fontsize=8)
+            if axes[row][col].get_legend_handles_labels()[0]:
+                axes[row][col].legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
 
