@@ -7,7 +7,9 @@ The trainer runs, inside one ``imitator`` stage, what PHC's official code does b
    hard-negative clip weights as configured in ``PHCParams``). Every ``eval_every`` PPO iterations
    the current deterministic policy is evaluated with the env's protocol
    (:meth:`~mocap_phc.env.ImitationEnv.evaluate_clips`: every clip of the primitive's set once from
-   its first frame, deterministic actions, failure = mean body error above ``eval_threshold``).
+   its first frame, deterministic actions, failure = mean body error above ``eval_threshold``;
+   looping clips keep cycling for the training episode, ``episode_steps``, like ``mocap eval
+   --loop``, so a primitive that tracks one period of ``walk`` but drifts off later hands it on).
    The primitive is **frozen** when it plateaus (:class:`PlateauTracker`), when every clip of its
    set succeeds (``stop_on_success``), or when its env-step budget ends.
 2. At the freeze it is evaluated once more on its clip set; the clips it fails form the next hard
