@@ -289,7 +289,14 @@ class ImitationEnv:
         self._durations = lib.durations.to(dev, torch.float64)
         self._loops = lib.loops.to(dev)
         self._ref_next: MotionFrames | None = None
+        self._seen_next: MotionFrames | None = None  # what the policy observed of it (noisy references)
         self._obs: Tensor | None = None
+        # noisy references (params.reference_noise): the observed library, redrawn every reference_noise_every iterations
+        self._noise_seed = (int(seed) + 104729) % (2**31)
+        self._noise_draw = 0  # the draw the current observation was made with
+        self._noise_due = False  # a fresh draw takes effect at the next step, after its action
+        self.observed: MotionLibrary | None = None
+        self._draw_noise()
         self.last_evaluation: dict[str, Any] | None = None
         self.recovery_left = torch.zeros(N, dtype=torch.long, device=dev)
         self.root_dist = torch.zeros(N, dtype=torch.float64, device=dev)  # root to reference root, m (point-goal reward)
@@ -331,16 +338,35 @@ class ImitationEnv:
         k = self.progress if ids is None else self.progress[ids]
         return self.library.frames(c, t0 + (k + steps_ahead).to(torch.float64) * self.dt)
 
+    def _draw_noise(self) -> None:
+        """(Re)build the noisy observed library (``params.reference_noise``; draw ``_noise_draw``)."""
+        level = self.params.reference_noise
+        if level is None or level.clean:
+            self.observed = None
+            return
+        from mocap.noisy import noisy_library
+
+        self.observed = noisy_library(self.library, level, self._noise_seed + 7919 * self._noise_draw)
+
     def _observe(self, state: SimState, ids: Tensor | None = None) -> Tensor:
-        """Flat observations of envs ``ids`` (all when None); updates the cached next reference."""
+        """Flat observations of envs ``ids`` (all when None); updates the cached next reference
+        (clean) and what the policy saw of it (the noisy reference with ``reference_noise``)."""
         ref = self._ref_at(ids, 1)
+        seen = ref
+        if self.observed is not None:
+            c = self.clip_ids if ids is None else self.clip_ids[ids]
+            t0 = self.start_time if ids is None else self.start_time[ids]
+            k = self.progress if ids is None else self.progress[ids]
+            seen = self.observed.frames(c, t0 + (k + 1).to(torch.float64) * self.dt)
         st = state if ids is None else state.index(ids)
-        obs = PHCObservation.flatten(self.observation(st, ref))
+        obs = PHCObservation.flatten(self.observation(st, seen))
         if ids is None:
-            self._ref_next = ref
+            self._ref_next, self._seen_next = ref, seen
         else:
-            assert self._ref_next is not None
+            assert self._ref_next is not None and self._seen_next is not None
             _assign_rows(self._ref_next, ids, ref)
+            if self._seen_next is not self._ref_next:
+                _assign_rows(self._seen_next, ids, seen)
         return obs
 
     def _reset_envs(self, ids: Tensor) -> None:
@@ -427,7 +453,12 @@ class ImitationEnv:
         if tuple(a.shape) != (N, self.action_space.shape[0]):
             raise ValueError(f"actions must be ({N}, {self.action_space.shape[0]}), got {tuple(a.shape)}")
         ref = self._ref_next  # the reference at the time this step reaches
-        targets = self.action_map(a, ref.dof_pos)
+        seen = self._seen_next if self._seen_next is not None else ref
+        targets = self.action_map(a, seen.dof_pos)  # residuals are relative to the reference the policy saw
+        if self._noise_due:
+            self._noise_draw += 1
+            self._noise_due = False
+            self._draw_noise()
         state = self.sim.step(targets)
         self.progress += 1
 
@@ -611,6 +642,8 @@ class ImitationEnv:
         """Trainer hook: every ``eval_every`` iterations run :meth:`evaluate_clips` (which refreshes the
         sampling weights when ``hard_negative`` is on); returns scalars to log (empty otherwise)."""
         out: dict[str, float] = {}
+        if self.observed is not None and iteration > 0 and iteration % self.params.reference_noise_every == 0:
+            self._noise_due = True  # fresh noise from the next step's observation on (the current one stays)
         if self.amp_trainer is not None:  # the discriminator learns from the rollout just collected
             stats = self.amp_trainer.update(self.params.amp_updates_per_iteration, self.params.amp_batch)
             out.update({f"amp/{k}": v for k, v in stats.items()})
@@ -645,6 +678,8 @@ class ImitationEnv:
             "ep_return": self.ep_return.cpu().clone(),
             "recovery_left": self.recovery_left.cpu().clone(),
             "root_dist": self.root_dist.cpu().clone(),
+            "noise_draw": self._noise_draw,
+            "noise_due": self._noise_due,
             **self.failures.state_dict(),
         }
         if self.amp_trainer is not None:
@@ -674,6 +709,10 @@ class ImitationEnv:
             self.recovery_left = state["recovery_left"].to(dev).clone()
         if "root_dist" in state:
             self.root_dist = state["root_dist"].to(dev).clone()
+        self._noise_due = bool(state.get("noise_due", False))
+        if int(state.get("noise_draw", 0)) != self._noise_draw:
+            self._noise_draw = int(state.get("noise_draw", 0))
+            self._draw_noise()
         self.failures.load_state_dict(state)
         if self.amp_trainer is not None:
             assert self.amp_history is not None

@@ -20,6 +20,7 @@ from typing import Any, Literal
 import torch
 from pydantic import BaseModel, ConfigDict, Field
 
+from mocap.noisy import NoiseLevel
 from mocap.skeleton import Skeleton
 from mocap_phc.env import ActionMap, ImitationEnv, PHCObservation, PolicyImitator
 from mocap_phc.recovery import FailStateParams, RecoveryGoalParams
@@ -99,6 +100,14 @@ class PHCParams(BaseModel):
         None,
         description="fallen and far episode starts with a grace window (PHC+ fail-state recovery, mocap_phc.recovery); None: RSI only",
     )
+    reference_noise: NoiseLevel | None = Field(
+        None,
+        description="train on references with synthetic estimator noise (mocap.noisy: joint and root jitter, dropped frames): "
+        "the policy observes the noisy reference and its residual actions are relative to it, while the reward, termination "
+        "and the hard-negative evaluation use the clean clip ([I], not in PHC, which trains on clean AMASS; for avatars driven "
+        "by video pose estimators, what `mocap eval-noisy` measures). None: clean references",
+    )
+    reference_noise_every: int = Field(1, ge=1, description="PPO iterations between fresh draws of the reference noise")
     recovery_goal: RecoveryGoalParams | None = Field(
         None,
         description="fail-state recovery goal (PHC Eq. 3, mocap_phc.recovery): farther than close_distance from the reference root, "
