@@ -172,6 +172,8 @@ def evaluate_noisy(
     from mocap.evaluation import ImitationEvalParams, evaluate_imitator
     from mocap.metrics import default_metrics
 
+    if not levels:
+        raise ValueError("evaluate_noisy needs at least one noise level")
     params = ImitationEvalParams(num_envs=num_envs, horizon=horizon, video=False)
     rows = []
     for i, level in enumerate(levels):

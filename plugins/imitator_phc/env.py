@@ -332,11 +332,11 @@ class ImitationEnv:
             )
 
     # ----------------------------------------------------------------------------- helpers
-    def _ref_at(self, ids: Tensor | None, steps_ahead: int) -> MotionFrames:
+    def _ref_at(self, ids: Tensor | None, steps_ahead: int, library: MotionLibrary | None = None) -> MotionFrames:
         c = self.clip_ids if ids is None else self.clip_ids[ids]
         t0 = self.start_time if ids is None else self.start_time[ids]
         k = self.progress if ids is None else self.progress[ids]
-        return self.library.frames(c, t0 + (k + steps_ahead).to(torch.float64) * self.dt)
+        return (library or self.library).frames(c, t0 + (k + steps_ahead).to(torch.float64) * self.dt)
 
     def _draw_noise(self) -> None:
         """(Re)build the noisy observed library (``params.reference_noise``; draw ``_noise_draw``)."""
@@ -352,12 +352,7 @@ class ImitationEnv:
         """Flat observations of envs ``ids`` (all when None); updates the cached next reference
         (clean) and what the policy saw of it (the noisy reference with ``reference_noise``)."""
         ref = self._ref_at(ids, 1)
-        seen = ref
-        if self.observed is not None:
-            c = self.clip_ids if ids is None else self.clip_ids[ids]
-            t0 = self.start_time if ids is None else self.start_time[ids]
-            k = self.progress if ids is None else self.progress[ids]
-            seen = self.observed.frames(c, t0 + (k + 1).to(torch.float64) * self.dt)
+        seen = ref if self.observed is None else self._ref_at(ids, 1, self.observed)
         st = state if ids is None else state.index(ids)
         obs = PHCObservation.flatten(self.observation(st, seen))
         if ids is None:
