@@ -38,6 +38,7 @@ from mocap_vmp.tracking import (
     update_counter,
     vmp_imitator,
     vmp_reward,
+    vmp_reward_exp,
 )
 
 TINY = {
@@ -213,6 +214,51 @@ def test_reward_sign_alive_and_linearity_in_weights(seed, scale, alive):
     for g in ("h", "theta", "v", "q", "qd", "p"):
         wg = VmpRewardWeights(**{**w.model_dump(), g: getattr(w, g) + 1.0})
         torch.testing.assert_close(vmp_reward(track, smooth, wg)[0] - total, -track[g], rtol=1e-9, atol=1e-9)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 10_000), k=st.floats(0.1, 10.0), grow=st.floats(0.0, 5.0))
+def test_exp_reward_bounds_zero_error_and_monotone(seed, k, grow):
+    gen = torch.Generator().manual_seed(seed)
+    a, b = _random_features(gen, 3), _random_features(gen, 3)
+    track = tracking_errors(a, b, LAYOUT)
+    dims = {g: sl.stop - sl.start for g, sl in LAYOUT.slices.items() if g in track}
+    act = torch.randn(3, 3, 5, generator=gen, dtype=f64)
+    smooth = smoothness_errors(act[0], act[1], act[2], torch.randn(3, 5, generator=gen, dtype=f64))
+    w = VmpRewardWeights()
+    total, terms = vmp_reward_exp(track, smooth, w, dims, k)
+    torch.testing.assert_close(total, sum(terms.values()), rtol=1e-12, atol=1e-9)
+    # each tracking term in [0, c_g], equal to c_g exp(-k e / n) in closed form
+    for g, e in track.items():
+        c = getattr(w, g)
+        assert bool((terms[f"track/{g}"] >= 0).all()) and bool((terms[f"track/{g}"] <= c + 1e-12).all())
+        torch.testing.assert_close(terms[f"track/{g}"], c * torch.exp(-k * e / dims[g]))
+    # the smoothness terms and the alive bonus are the paper form's
+    _, paper_terms = vmp_reward(track, smooth, w)
+    for key in ("alive", "smooth/da", "smooth/dda", "smooth/tau"):
+        torch.testing.assert_close(terms[key], paper_terms[key])
+    # zero tracking and smoothness errors: the maximum, alive + sum of the tracking weights
+    zt = {g: torch.zeros(3, dtype=f64) for g in track}
+    zs = {s_: torch.zeros(3, dtype=f64) for s_ in smooth}
+    best = w.alive + w.h + w.theta + w.v + w.q + w.qd + w.p
+    torch.testing.assert_close(vmp_reward_exp(zt, zs, w, dims, k)[0], torch.full((3,), best, dtype=f64))
+    assert bool((total <= best + 1e-9).all())
+    # a larger error in one group never raises the reward
+    for g in track:
+        more = {**track, g: track[g] + grow}
+        assert bool((vmp_reward_exp(more, smooth, w, dims, k)[0] <= total + 1e-12).all())
+
+
+def test_exp_reward_form_in_the_env(amp, lib, latent):
+    env = _env(amp, lib, latent, n=2, reward_form="exp", exp_scale=2.0, reward={"alive": 0.0})
+    p = env.params
+    env.reset()
+    res = env.step(torch.zeros(2, env.num_actions))
+    for g in ("h", "theta", "v", "q", "qd", "p"):
+        v = res.info[f"reward/track/{g}"]
+        assert bool((v >= 0).all()) and bool((v <= getattr(p.reward, g) + 1e-6).all())
+    assert bool(torch.isfinite(res.reward).all())
+    env.close()
 
 
 # --------------------------------------------------------------------------------- termination
