@@ -39,6 +39,10 @@ def evaluate(target: Path) -> dict:
         loaded.policy, loaded.library, loaded.make_sim, ImitationEvalParams(video=False), [*default_metrics(), JointMAE(loaded.skeleton)]
     )
     agg = table["aggregate"]
+    from mocap_vmp.metrics import latent_label_metrics
+
+    # the paper's section 5.4 latent metrics, labels = clip names (the same VAE under both trackers)
+    label = latent_label_metrics(loaded.latent, loaded.library) if loaded.latent is not None and loaded.library.num_clips >= 2 else {}
     conditioning = info.resolved.spec.latent.trainer.params["tracker"]["conditioning"] if info.resolved.spec.latent.trainer else None
     return {
         "target": str(target),
@@ -47,7 +51,9 @@ def evaluate(target: Path) -> dict:
         "total": agg["total"],
         "joint_mae_deg": agg["joint_mae"],
         "mpjpe_g": agg["mpjpe_g"],
-        "clips": {name: {"success": row["success"], "joint_mae_deg": row["joint_mae"], "mpjpe_g": row["mpjpe_g"]} for name, row in table["clips"].items()},
+        "tracked_s": agg.get("tracked_s"),
+        "latent_metrics": label,
+        "clips": {name: {"success": row["success"], "joint_mae_deg": row["joint_mae"], "mpjpe_g": row["mpjpe_g"], "tracked_s": row.get("tracked_s")} for name, row in table["clips"].items()},
     }
 
 
@@ -73,7 +79,8 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"LM: {lm['succeeded']}/{lm['total']} clips, joint MAE {lm['joint_mae_deg']:.2f} deg, MPJPE-g {lm['mpjpe_g']:.0f} mm\n"
         f"M:  {m['succeeded']}/{m['total']} clips, joint MAE {m['joint_mae_deg']:.2f} deg, MPJPE-g {m['mpjpe_g']:.0f} mm\n"
-        f"LM lower on {result['clips_where_lm_is_lower']}/{result['clips_compared']} clips; wrote {args.out}"
+        f"LM lower on {result['clips_where_lm_is_lower']}/{result['clips_compared']} clips; "
+        f"VAE latent metrics (clip labels): {lm['latent_metrics']}; wrote {args.out}"
     )
     return 0
 
