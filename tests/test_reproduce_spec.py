@@ -21,7 +21,8 @@ def test_reproduce_spec_trains_everything_and_shares_the_imitator():
     assert set(cells) == {"latent-none", "latent-pulse", "latent-hybrid_rvq", "latent-vmp"}
     committed = {p.parent.name for p in (ROOT / "checkpoints").glob("*/*.pt")}
     latents = {f"{r.spec.latent.name}_amp" for r in cells.values() if r.spec.latent is not None}
-    covered = {"imitator_amp", "imitator_amp_v2"} | latents  # _v2: the same recipe trained further
+    # imitator _v2: the same recipe trained further; vmp_amp: an earlier recipe, superseded by vmp_amp_v2
+    covered = {"imitator_amp", "imitator_amp_v2", "vmp_amp_v2"} | latents
     assert committed <= covered, f"committed checkpoints without a cell: {committed - covered}"
     keys = {name: stage_keys(r.spec) for name, r in cells.items()}
     assert len({k["imitator"] for k in keys.values()}) == 1  # one imitator artifact for all cells
