@@ -35,3 +35,14 @@ def smpl():
     from mocap.humanoids.smpl import smpl_skeleton
 
     return smpl_skeleton()
+
+
+def load_bench(name: str):
+    """The script ``bench/<name>.py`` imported as a module (bench/ is not a package)."""
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / "bench" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module

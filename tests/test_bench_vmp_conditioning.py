@@ -2,24 +2,17 @@
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import pytest
 import torch
+from conftest import load_bench
 
 from mocap.state import Trajectories
 from mocap_vmp.metrics import joint_mae_deg
 
-ROOT = Path(__file__).resolve().parents[1]
-
 
 @pytest.fixture(scope="module")
 def vc():
-    spec = importlib.util.spec_from_file_location("vmp_conditioning", ROOT / "bench" / "vmp_conditioning.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_bench("vmp_conditioning")
 
 
 def _unit(q: torch.Tensor) -> torch.Tensor:
