@@ -5,7 +5,7 @@ specs/latent/vmp_amp_m.yaml).
 Each tracker is evaluated with the project's imitation protocol (every bundled clip once from its
 first frame, deterministic actions) plus VMP's joint MAE in degrees::
 
-    python bench/vmp_conditioning.py --lm checkpoints/vmp_amp --m runs/vmp-amp-m \\
+    python bench/vmp_conditioning.py --lm checkpoints/vmp_amp_v2 --m runs/vmp-amp-m \\
         --out bench/results/vmp_conditioning.json
 
 The paper's claim (Table 2): LM has a lower mean joint MAE than M.

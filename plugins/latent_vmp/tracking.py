@@ -47,7 +47,7 @@ the PD targets directly; the absolute map is that up to a fixed per-joint affine
 ``+ c_g exp(-k e_g / n_g)`` with ``e_g`` the group's squared error above, ``n_g`` its number of
 feature dimensions and ``k = exp_scale`` (alive and smoothness terms unchanged). The paper's sum is
 far below zero until the policy tracks (about -86 per step here at the start against the +6
-alive bonus), so on a small CPU budget its signal is mostly the clip at zero; the kernel keeps a
+alive bonus), so on a small CPU budget its signal is mostly the clamp at zero; the kernel keeps a
 gradient everywhere, as DeepMimic / PHC rewards do.
 
 Both sides of the tracking terms are features of :func:`state_features` in their own heading
