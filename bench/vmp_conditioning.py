@@ -24,15 +24,12 @@ import math
 from pathlib import Path
 
 
-def rollout(target: Path):
-    """The protocol's rollout of every clip (one env per clip, deterministic): its Trajectories."""
+def rollout(loaded):
+    """The protocol's rollout of every clip of a built evaluation target (one env per clip,
+    deterministic): its Trajectories."""
     import torch
-    from mocap.evaluation import build_evaluation_target, episode_frames, load_evaluation_target, rollout_imitation
-    from mocap.plugins import get_plugins
+    from mocap.evaluation import episode_frames, rollout_imitation
 
-    torch.set_num_threads(1)
-    plugins = get_plugins()
-    loaded = build_evaluation_target(load_evaluation_target(target, plugins), plugins)
     lib = loaded.library
     ids = torch.arange(lib.num_clips)
     sim = loaded.make_sim(len(ids))
@@ -40,7 +37,7 @@ def rollout(target: Path):
         out = rollout_imitation(sim, lib, loaded.policy, ids, episode_frames(lib, ids, sim.dt, None), threshold=0.5)
     finally:
         sim.close()
-    return out.traj, loaded.skeleton, list(lib.clip_names)
+    return out.traj
 
 
 def equal_frames_joint_mae(a, b, skeleton) -> tuple[list[float], list[float], list[int]]:
@@ -61,7 +58,8 @@ def equal_frames_joint_mae(a, b, skeleton) -> tuple[list[float], list[float], li
     )
 
 
-def evaluate(target: Path) -> dict:
+def evaluate(target: Path) -> tuple[dict, object]:
+    """The protocol's table and joint MAE of one tracker, and the built target (for :func:`rollout`)."""
     import torch
     from mocap.evaluation import (
         ImitationEvalParams,
@@ -71,7 +69,7 @@ def evaluate(target: Path) -> dict:
     )
     from mocap.metrics import default_metrics
     from mocap.plugins import get_plugins
-    from mocap_vmp.metrics import JointMAE
+    from mocap_vmp.metrics import JointMAE, latent_label_metrics
 
     torch.set_num_threads(1)
     plugins = get_plugins()
@@ -81,8 +79,6 @@ def evaluate(target: Path) -> dict:
         loaded.policy, loaded.library, loaded.make_sim, ImitationEvalParams(video=False), [*default_metrics(), JointMAE(loaded.skeleton)]
     )
     agg = table["aggregate"]
-    from mocap_vmp.metrics import latent_label_metrics
-
     # the paper's section 5.4 latent metrics, labels = clip names (the same VAE under both trackers)
     label = latent_label_metrics(loaded.latent, loaded.library) if loaded.latent is not None and loaded.library.num_clips >= 2 else {}
     conditioning = info.resolved.spec.latent.trainer.params["tracker"]["conditioning"] if info.resolved.spec.latent.trainer else None
@@ -96,7 +92,7 @@ def evaluate(target: Path) -> dict:
         "tracked_s": agg.get("tracked_s"),
         "latent_metrics": label,
         "clips": {name: {"success": row["success"], "joint_mae_deg": row["joint_mae"], "mpjpe_g": row["mpjpe_g"], "tracked_s": row.get("tracked_s")} for name, row in table["clips"].items()},
-    }
+    }, loaded
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -105,9 +101,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--m", type=Path, required=True, help="the M-conditioned VMP")
     ap.add_argument("--out", type=Path, default=Path("bench/results/vmp_conditioning.json"))
     args = ap.parse_args(argv)
-    lm, m = evaluate(args.lm), evaluate(args.m)
-    (tr_lm, skel, names), (tr_m, _, _) = rollout(args.lm), rollout(args.m)
-    e_lm, e_m, n_frames = equal_frames_joint_mae(tr_lm, tr_m, skel)
+    (lm, loaded_lm), (m, loaded_m) = evaluate(args.lm), evaluate(args.m)
+    names = list(loaded_lm.library.clip_names)
+    e_lm, e_m, n_frames = equal_frames_joint_mae(rollout(loaded_lm), rollout(loaded_m), loaded_lm.skeleton)
     equal = {
         "definition": "per clip, joint MAE (deg) of both policies on the frames both track; then the mean over clips",
         "LM": sum(e_lm) / len(e_lm),

@@ -274,20 +274,24 @@ def smoothness_errors(a: Tensor, a1: Tensor, a2: Tensor, tau: Tensor) -> dict[st
     }
 
 
+def _reward_total(
+    track_terms: dict[str, Tensor], smooth: dict[str, Tensor], w: VmpRewardWeights
+) -> tuple[Tensor, dict[str, Tensor]]:
+    """``c_alive + sum of the weighted tracking terms - sum_s c_s e_s`` and every term by name."""
+    any_t = next(iter(track_terms.values()))
+    terms: dict[str, Tensor] = {"alive": torch.full_like(any_t, float(w.alive))}
+    terms.update({f"track/{g}": v for g, v in track_terms.items()})
+    terms.update({f"smooth/{k}": -float(getattr(w, k)) * e for k, e in smooth.items()})
+    total = terms["alive"].clone()
+    for v in list(terms.values())[1:]:
+        total = total + v
+    return total, terms
+
+
 def vmp_reward(track: dict[str, Tensor], smooth: dict[str, Tensor], w: VmpRewardWeights) -> tuple[Tensor, dict[str, Tensor]]:
     """Eq. 5: ``r = -sum_g c_g e_g + c_alive - sum_s c_s e_s``; returns the total and each weighted term
     (``track/<g>``, ``alive``, ``smooth/<s>``; all but ``alive`` are <= 0)."""
-    terms: dict[str, Tensor] = {}
-    any_t = next(iter(track.values()))
-    total = torch.full_like(any_t, float(w.alive))
-    terms["alive"] = total.clone()
-    for g, e in track.items():
-        terms[f"track/{g}"] = -float(getattr(w, g)) * e
-        total = total + terms[f"track/{g}"]
-    for k, e in smooth.items():
-        terms[f"smooth/{k}"] = -float(getattr(w, k)) * e
-        total = total + terms[f"smooth/{k}"]
-    return total, terms
+    return _reward_total({g: -float(getattr(w, g)) * e for g, e in track.items()}, smooth, w)
 
 
 def vmp_reward_exp(
@@ -295,17 +299,8 @@ def vmp_reward_exp(
 ) -> tuple[Tensor, dict[str, Tensor]]:
     """``reward_form: exp``: ``r = sum_g c_g exp(-scale e_g / n_g) + c_alive - sum_s c_s e_s`` with
     ``n_g = dims[g]``; same term names as :func:`vmp_reward` (``track/<g>`` here in [0, c_g])."""
-    terms: dict[str, Tensor] = {}
-    any_t = next(iter(track.values()))
-    total = torch.full_like(any_t, float(w.alive))
-    terms["alive"] = total.clone()
-    for g, e in track.items():
-        terms[f"track/{g}"] = float(getattr(w, g)) * torch.exp(-scale * e / max(int(dims[g]), 1))
-        total = total + terms[f"track/{g}"]
-    for k, e in smooth.items():
-        terms[f"smooth/{k}"] = -float(getattr(w, k)) * e
-        total = total + terms[f"smooth/{k}"]
-    return total, terms
+    kernels = {g: float(getattr(w, g)) * torch.exp(-scale * e / max(int(dims[g]), 1)) for g, e in track.items()}
+    return _reward_total(kernels, smooth, w)
 
 
 # ------------------------------------------------------------------------------- termination
@@ -470,6 +465,8 @@ class VmpTrackingEnv:
         self.obs_dim = self.proprio_dim + self.cond.dim
         self.episode_steps = max(1, round(p.episode_length_s / self.dt))
         self.persist = persist_steps(p.termination_persist_s, self.dt)
+        # n_g of reward_form 'exp': feature dimensions of each tracking group
+        self.track_dims = {g: sl.stop - sl.start for g, sl in self.layout.slices.items() if g in TRACK_TERMS}
         self._gen = torch.Generator(device="cpu")
         self._gen.manual_seed(int(seed))
         self._dur = lib._dur64.to(dev)
@@ -565,8 +562,7 @@ class VmpTrackingEnv:
         tau = state.dof_force.to(a) if state.dof_force.numel() else state.dof_force
         smooth = smoothness_errors(x.float(), hist[:, 0], hist[:, 1], tau)
         if p.reward_form == "exp":
-            dims = {g: sl.stop - sl.start for g, sl in layout.slices.items() if g in TRACK_TERMS}
-            reward, terms = vmp_reward_exp(track, smooth, p.reward, dims, p.exp_scale)
+            reward, terms = vmp_reward_exp(track, smooth, p.reward, self.track_dims, p.exp_scale)
         else:
             reward, terms = vmp_reward(track, smooth, p.reward)
         if p.only_positive_rewards:
