@@ -5,10 +5,12 @@ specs/latent/vmp_amp_m.yaml).
 Each tracker is evaluated with the project's imitation protocol (every bundled clip once from its
 first frame, deterministic actions) plus VMP's joint MAE in degrees::
 
-    python bench/vmp_conditioning.py --lm checkpoints/vmp_amp_v2 --m runs/vmp-amp-m \\
+    python bench/vmp_conditioning.py --lm checkpoints/vmp_amp_v2 --m checkpoints/vmp_amp_m \\
         --out bench/results/vmp_conditioning.json
 
-The paper's claim (Table 2): LM has a lower mean joint MAE than M.
+It writes the JSON and, next to it, a per-clip bar plot (``.png``). The paper's claim (Table 2):
+LM has a lower mean joint MAE than M. The JSON also has a one-sided sign test on the number of
+clips where LM is lower (one seed per policy: per-clip counts are the only spread measured here).
 
 Two joint MAEs are reported. ``joint_mae_deg`` is the protocol's: each clip's frames until that
 policy fails, so a policy that stays up longer is also scored on later, harder frames. The paper's
@@ -56,6 +58,44 @@ def equal_frames_joint_mae(a, b, skeleton) -> tuple[list[float], list[float], li
         joint_mae_deg(cut(b), skeleton).tolist(),
         both.sum(0).tolist(),
     )
+
+
+def sign_test_p(k: int, n: int) -> float:
+    """One-sided sign test: P(X >= k) for X ~ Binomial(n, 1/2), the chance that a policy no better
+    than the other is lower on at least ``k`` of ``n`` clips."""
+    if not 0 <= k <= n:
+        raise ValueError(f"sign test: need 0 <= k <= n, got k={k}, n={n}")
+    return sum(math.comb(n, i) for i in range(k, n + 1)) / 2**n
+
+
+def plot(result: dict, out: Path) -> None:
+    """Per-clip joint MAE of LM and M (own tracked frames, and the frames both track) as bars;
+    a clip each policy tracks to its end is marked with a dot."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(result["LM"]["clips"])
+    x = list(range(len(names)))
+    fig, axes = plt.subplots(1, 2, figsize=(13, 4.2), sharey=True)
+    panels = (
+        ("own tracked frames", {k: [result[k]["clips"][n]["joint_mae_deg"] for n in names] for k in ("LM", "M")}, result["LM"]["joint_mae_deg"], result["M"]["joint_mae_deg"]),
+        ("frames both track", {k: [result["equal_frames"]["clips"][n][k] for n in names] for k in ("LM", "M")}, result["equal_frames"]["LM"], result["equal_frames"]["M"]),
+    )
+    for ax, (title, vals, mean_lm, mean_m) in zip(axes, panels):
+        for off, key, color in ((-0.2, "LM", "tab:blue"), (0.2, "M", "tab:orange")):
+            mean = mean_lm if key == "LM" else mean_m
+            ax.bar([i + off for i in x], vals[key], width=0.4, color=color, label=f"{key} (mean {mean:.2f}°)")
+            ok = [i for i, n in enumerate(names) if result[key]["clips"][n]["success"]]
+            ax.plot([i + off for i in ok], [vals[key][i] + 0.3 for i in ok], "k.", ms=5)
+        ax.set_xticks(x, names, rotation=60, ha="right", fontsize=8)
+        ax.set_title(f"joint MAE per clip, {title}")
+        ax.legend(fontsize=8)
+    axes[0].set_ylabel("joint MAE (deg); dot: clip tracked to its end")
+    fig.tight_layout()
+    fig.savefig(out, dpi=100)
+    plt.close(fig)
 
 
 def evaluate(target: Path) -> tuple[dict, object]:
@@ -123,13 +163,17 @@ def main(argv: list[str] | None = None) -> int:
         "clips_compared": len(both),
         "equal_frames": equal,
     }
+    result["sign_test_p"] = sign_test_p(result["clips_where_lm_is_lower"], len(both))
+    equal["sign_test_p"] = sign_test_p(equal["clips_where_lm_is_lower"], len(e_lm))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=2) + "\n")
+    plot(result, args.out.with_suffix(".png"))
     print(
         f"LM: {lm['succeeded']}/{lm['total']} clips, joint MAE {lm['joint_mae_deg']:.2f} deg, MPJPE-g {lm['mpjpe_g']:.0f} mm\n"
         f"M:  {m['succeeded']}/{m['total']} clips, joint MAE {m['joint_mae_deg']:.2f} deg, MPJPE-g {m['mpjpe_g']:.0f} mm\n"
-        f"LM lower on {result['clips_where_lm_is_lower']}/{result['clips_compared']} clips\n"
-        f"equal frames: LM {equal['LM']:.2f} deg, M {equal['M']:.2f} deg, LM lower on {equal['clips_where_lm_is_lower']}/{len(e_lm)} clips\n"
+        f"LM lower on {result['clips_where_lm_is_lower']}/{result['clips_compared']} clips (sign test p = {result['sign_test_p']:.3f})\n"
+        f"equal frames: LM {equal['LM']:.2f} deg, M {equal['M']:.2f} deg, LM lower on {equal['clips_where_lm_is_lower']}/{len(e_lm)} clips "
+        f"(p = {equal['sign_test_p']:.3f})\n"
         f"VAE latent metrics (clip labels): {lm['latent_metrics']}; wrote {args.out}"
     )
     return 0

@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 import torch
 from conftest import load_bench
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from mocap.state import Trajectories
 from mocap_vmp.metrics import joint_mae_deg
@@ -46,3 +50,23 @@ def test_equal_frames_uses_the_common_frames(vc, amp):
     assert frames2 == frames
     torch.testing.assert_close(torch.tensor(e_a2), torch.tensor(e_a))
     torch.testing.assert_close(torch.tensor(e_b2), torch.tensor(e_b))
+
+
+@given(st.integers(1, 40), st.data())
+@settings(max_examples=60, deadline=None)
+def test_sign_test_is_a_binomial_tail(vc, n, data):
+    k = data.draw(st.integers(0, n))
+    p = vc.sign_test_p(k, n)
+    assert 0.0 < p <= 1.0
+    assert vc.sign_test_p(0, n) == pytest.approx(1.0)
+    assert vc.sign_test_p(n, n) == pytest.approx(0.5**n)
+    if k < n:  # a larger count is rarer, by exactly the mass at k
+        assert vc.sign_test_p(k + 1, n) == pytest.approx(p - math.comb(n, k) / 2**n)
+    # symmetry of Binomial(n, 1/2): P(X >= k) + P(X >= n - k + 1) = 1
+    assert p + (vc.sign_test_p(n - k + 1, n) if k >= 1 else 0.0) == pytest.approx(1.0)
+
+
+def test_sign_test_known_value_and_bad_input(vc):
+    assert vc.sign_test_p(12, 15) == pytest.approx(576 / 32768)
+    with pytest.raises(ValueError):
+        vc.sign_test_p(16, 15)

@@ -21,8 +21,9 @@ def test_reproduce_spec_trains_everything_and_shares_the_imitator():
     assert set(cells) == {"latent-none", "latent-pulse", "latent-hybrid_rvq", "latent-vmp"}
     committed = {p.parent.name for p in (ROOT / "checkpoints").glob("*/*.pt")}
     latents = {f"{r.spec.latent.name}_amp" for r in cells.values() if r.spec.latent is not None}
-    # imitator _v2: the same recipe trained further; vmp_amp: an earlier recipe, superseded by vmp_amp_v2
-    covered = {"imitator_amp", "imitator_amp_v2", "vmp_amp_v2"} | latents
+    # imitator _v2: the same recipe trained further; vmp_amp: an earlier recipe, superseded by vmp_amp_v2;
+    # vmp_amp_m: the M-conditioning ablation of the vmp cell (test below)
+    covered = {"imitator_amp", "imitator_amp_v2", "vmp_amp_v2", "vmp_amp_m"} | latents
     assert committed <= covered, f"committed checkpoints without a cell: {committed - covered}"
     keys = {name: stage_keys(r.spec) for name, r in cells.items()}
     assert len({k["imitator"] for k in keys.values()}) == 1  # one imitator artifact for all cells
@@ -36,3 +37,15 @@ def test_reproduce_spec_trains_everything_and_shares_the_imitator():
         assert spec.latent.checkpoint is None and spec.latent.trainer is not None, name
         recipe = load_spec(ROOT / "specs" / "latent" / f"{spec.latent.name}_amp.yaml", plugins).spec
         assert spec.latent.model_dump() == recipe.latent.model_dump(), f"{name}: differs from specs/latent/{spec.latent.name}_amp.yaml"
+
+
+def test_vmp_m_ablation_differs_from_the_vmp_recipe_only_by_conditioning():
+    """checkpoints/vmp_amp_m is reproduced by specs/latent/vmp_amp_m.yaml: the vmp cell's recipe
+    with M conditioning (VMP Table 2), nothing else changed."""
+    plugins = get_plugins()
+    lm = load_spec(ROOT / "specs" / "latent" / "vmp_amp.yaml", plugins).spec.latent.model_dump()
+    m = load_spec(ROOT / "specs" / "latent" / "vmp_amp_m.yaml", plugins).spec.latent.model_dump()
+    assert lm["trainer"]["params"]["tracker"]["conditioning"] == "LM"
+    assert m["trainer"]["params"]["tracker"]["conditioning"] == "M"
+    m["trainer"]["params"]["tracker"]["conditioning"] = "LM"
+    assert m == lm
