@@ -146,10 +146,13 @@ def test_point_reward_replaces_imitation_while_far(amp, walk):  # noqa: F811
     expected = prev - env.root_dist
     energy = res.reward.double() - expected
     assert bool((energy <= 1e-9).all()) and bool((energy > -0.05).all()), energy  # reward = point term + a small energy penalty
+    assert bool((res.info["recovery/far"] == 1.0).all())  # diagnostics: every env is recovering ...
+    torch.testing.assert_close(res.info["recovery/root_dist_m"].double(), env.root_dist.double(), atol=1e-5, rtol=0)  # ... at this distance
     near = _env(amp, walk, None, recovery_goal=RecoveryGoalParams(reward="point"))
     near.reset()
-    r = near.step(torch.zeros(4, amp.num_dofs)).reward
-    assert bool((r > 0.1).all())  # close to the reference: the imitation reward (in (0, 1]), not a tiny distance change
+    res = near.step(torch.zeros(4, amp.num_dofs))
+    assert bool((res.reward > 0.1).all())  # close to the reference: the imitation reward (in (0, 1]), not a tiny distance change
+    assert bool((res.info["recovery/far"] == 0.0).all())
 
 
 def test_bonus_recovery_episodes_replace_terminations(amp, walk):  # noqa: F811

@@ -11,7 +11,14 @@ from hypothesis import strategies as st
 from test_distill import walk  # noqa: F401  (fixture)
 
 from mocap_phc.recovery import FailStateParams, generate_fall_states
-from mocap_phc.recovery_eval import RecoveryEvalParams, evaluate_recovery, pick_clip, recovery_summary
+from mocap_phc.recovery_eval import (
+    RecoveryEvalParams,
+    evaluate_recovery,
+    pick_clip,
+    pick_still_frame,
+    recovery_summary,
+    still_reference,
+)
 
 
 def test_summary_counts_the_first_step_within_the_threshold():
@@ -82,20 +89,59 @@ def test_fallen_states_are_valid(amp):
     assert float(s.dof_vel.abs().max()) == 0.0 and float(s.root_lin_vel.abs().max()) == 0.0
 
 
-def test_evaluate_recovery_with_a_policy_that_never_gets_up(amp, walk):  # noqa: F811
+@pytest.mark.parametrize("reference", ["still", "clip"])
+def test_evaluate_recovery_with_a_policy_that_never_gets_up(amp, walk, reference):  # noqa: F811
     from mocap.motion.library import MotionLibrary
     from mocap_sim_mujoco.simulator import MujocoSimulator
 
     lib = MotionLibrary(walk, amp)
-    params = RecoveryEvalParams(trials=4, seconds=0.3, far_prob=0.5, seed=3, fall=FailStateParams(settle_steps=20))
+    params = RecoveryEvalParams(trials=4, seconds=0.3, reference=reference, far_prob=0.5, seed=3, fall=FailStateParams(settle_steps=20))
 
     def make_sim(n):
         return MujocoSimulator(skeleton=amp, num_envs=n, seed=0)
 
     res = evaluate_recovery(HoldPose(amp.num_dofs), lib, make_sim, amp, params)
-    assert res["protocol"] == "mocap-recovery-v1" and res["trials"] == 4 and res["clip"] == "walk"
+    assert res["protocol"] == "mocap-recovery-v2" and res["trials"] == 4 and res["clip"] == "walk"
+    assert res["reference"] == reference
     assert res["recovery_rate"] == 0.0 and res["root_back_rate"] <= 0.5  # lying still: never back on the reference
     assert res["fallen_near_trials"] + res["fallen_far_trials"] == 4
     assert res["start_root_height_m"] < 0.5
     again = evaluate_recovery(HoldPose(amp.num_dofs), lib, make_sim, amp, params)
     assert again == res  # seeded: the same fallen states and offsets
+
+
+@pytest.fixture(scope="module")
+def bundled(amp):
+    from mocap.motion.deepmimic import DeepMimicParams, DeepMimicSource
+    from mocap.motion.library import MotionLibrary
+
+    return MotionLibrary(DeepMimicSource(DeepMimicParams()).load(amp), amp)
+
+
+def test_still_frame_of_the_bundled_clips_is_a_standing_rest_pose(bundled):
+    clip, t = pick_still_frame(bundled)
+    name = bundled.clip_names[clip]
+    assert name.startswith("getup_")  # the get-ups end standing at rest; every other clip moves
+    assert t == pytest.approx(float(bundled.durations[clip]))
+    ref = still_reference(bundled, clip, t, 3)
+    assert bool((ref.root_pos[:, 2] > 0.7).all())  # standing (root ~0.85 m)
+    for k in ("root_lin_vel", "root_ang_vel", "dof_vel", "body_lin_vel", "body_ang_vel"):
+        assert float(getattr(ref, k).abs().max()) == 0.0, k
+    frame = bundled.frames(torch.tensor([clip]), torch.tensor([t], dtype=bundled.dtype))
+    torch.testing.assert_close(ref.body_pos[1], frame.body_pos[0])  # the clip's own pose, copied n times
+    # every other first/last frame that stands moves faster than the chosen one
+    n = bundled.num_clips
+    for times in (torch.zeros(n, dtype=bundled.dtype), bundled.durations):
+        f = bundled.frames(torch.arange(n), times)
+        speed = torch.linalg.vector_norm(f.body_lin_vel.double(), dim=-1).mean(-1)
+        standing = f.root_pos[:, 2] >= 0.7
+        chosen = torch.linalg.vector_norm(frame.body_lin_vel.double(), dim=-1).mean()
+        assert bool((speed[standing] >= chosen - 1e-12).all())
+
+
+def test_still_reference_with_a_named_clip_holds_its_last_frame(amp, bundled):
+    from mocap_sim_mujoco.simulator import MujocoSimulator
+
+    params = RecoveryEvalParams(trials=2, seconds=0.1, reference="still", clip="walk", far_prob=0.0, fall=FailStateParams(settle_steps=5))
+    res = evaluate_recovery(HoldPose(amp.num_dofs), bundled, lambda n: MujocoSimulator(skeleton=amp, num_envs=n, seed=0), amp, params)
+    assert res["clip"] == "walk" and res["reference_time_s"] == pytest.approx(float(bundled.durations[bundled.clip_names.index("walk")]))

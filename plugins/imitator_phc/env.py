@@ -460,11 +460,15 @@ class ImitationEnv:
         r_im, terms = self.reward_fn(state, ref)
         dist = torch.linalg.vector_norm(ref.root_pos.to(torch.float64) - state.root_pos.to(ref.root_pos.device, torch.float64), dim=-1)
         rg = p.recovery_goal
-        if rg is not None and rg.reward == "point":  # PHC Eq. 4: point-goal reward while far
-            from mocap_phc.recovery import point_goal_reward
-
+        recovery_info: dict[str, Tensor] = {}
+        if rg is not None:
             far = self.root_dist > rg.close_distance
-            r_im = torch.where(far.to(r_im.device), point_goal_reward(self.root_dist, dist).to(r_im), r_im)
+            # diagnostics of fail-state training: share of envs recovering (root far), their root distance
+            recovery_info = {"recovery/far": far.float(), "recovery/root_dist_m": dist.float()}
+            if rg.reward == "point":  # PHC Eq. 4: point-goal reward while far
+                from mocap_phc.recovery import point_goal_reward
+
+                r_im = torch.where(far.to(r_im.device), point_goal_reward(self.root_dist, dist).to(r_im), r_im)
         self.root_dist = dist
         energy = energy_penalty(state.dof_force, state.dof_vel, p.energy_form, p.energy_coef, self.progress)
         amp_info: dict[str, Tensor] = {}
@@ -525,6 +529,7 @@ class ImitationEnv:
             "terminated/tracking": parts["tracking"].float(),
             "terminated/fall": parts["fall"].float(),
             "terminated/unstable": parts["unstable"].float(),
+            **recovery_info,
         }
         return StepResult(
             obs=obs.clone(),

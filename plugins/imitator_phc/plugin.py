@@ -43,7 +43,12 @@ def register_commands(app: Any) -> None:
         ],
         trials: Annotated[int, typer.Option("--trials", help="fallen starts, simulated in parallel")] = 64,
         seconds: Annotated[float, typer.Option("--seconds", help="time allowed to recover, s")] = 10.0,
-        clip: Annotated[Optional[str], typer.Option("--clip", help="reference clip (default: walk)")] = None,
+        reference: Annotated[
+            str, typer.Option("--reference", help="'still': a standing frame held, PHC Table 4 (default); 'clip': the clip played, a moving target")
+        ] = "still",
+        clip: Annotated[
+            Optional[str], typer.Option("--clip", help="'still': hold this clip's last frame (default: the stillest standing frame); 'clip': the clip (default: walk)")
+        ] = None,
         far_prob: Annotated[float, typer.Option("--far-prob", help="share of trials also 2-5 m away from the reference")] = 0.5,
         seed: Annotated[int, typer.Option("--seed")] = 0,
         json_out: Annotated[Optional[Path], typer.Option("--json", help="write the result as JSON")] = None,
@@ -66,7 +71,11 @@ def register_commands(app: Any) -> None:
         plugins = get_plugins()
         info = load_evaluation_target(target, plugins)
         loaded = build_evaluation_target(info, plugins, use_latent=not imitator_only)
-        params = RecoveryEvalParams(trials=trials, seconds=seconds, clip=clip, far_prob=far_prob, seed=seed)
+        if reference not in ("still", "clip"):
+            from mocap.cli import UserError
+
+            raise UserError(f"--reference must be 'still' or 'clip', not {reference!r}")
+        params = RecoveryEvalParams(trials=trials, seconds=seconds, reference=reference, clip=clip, far_prob=far_prob, seed=seed)
         recorder = None
         if video is not None:
             probe = loaded.make_sim(1)
@@ -86,7 +95,8 @@ def register_commands(app: Any) -> None:
             f"recovery rate {res['recovery_rate']:.1%} of {res['trials']} fallen starts within {res['seconds']:g} s "
             f"(fallen near: {res['fallen_near_recovery_rate']:.1%}, fallen and far: {res['fallen_far_recovery_rate']:.1%}); "
             f"root back within 0.5 m: {res['root_back_rate']:.1%}; time to recover {res['time_to_recover_s']:.2f} s; "
-            f"reference clip {res['clip']}"
+            f"reference: {res['clip']} "
+            + (f"held at {res['reference_time_s']:.2f} s (standing still)" if res["reference"] == "still" else "played from its first frame")
         )
         if json_out is not None:
             json_out.parent.mkdir(parents=True, exist_ok=True)
