@@ -412,6 +412,19 @@ def test_ppo_learns_multi_discrete_point_env(tmp_path: Path):
     assert returns[-1] > returns[0] + 5 and returns[-1] > -5, (returns[0], returns[-1])
 
 
+def test_resume_with_a_constant_schedule_uses_the_specs_rate(tmp_path: Path):
+    """A run trained with the adaptive rule, continued with ``lr_schedule: constant``: the optimizer
+    runs at the spec's lr, not at the adapted rate saved in the checkpoint."""
+    adaptive = small_params(total_env_steps=32 * 32 * 2, lr_schedule="adaptive", desired_kl=1e-4)
+    _train(tmp_path, adaptive)
+    saved = load_checkpoint(tmp_path / "ppo.pt")["optimizer"]["param_groups"][0]["lr"]
+    assert saved != adaptive.lr  # the adaptive rule moved it
+    constant = adaptive.model_copy(update={"lr_schedule": "constant", "lr": 7e-4, "total_env_steps": 32 * 32 * 3})
+    _train(tmp_path, constant)
+    ck = load_checkpoint(tmp_path / "ppo.pt")
+    assert ck["iteration"] == 3 and ck["optimizer"]["param_groups"][0]["lr"] == pytest.approx(7e-4)
+
+
 @pytest.mark.parametrize("schedule", ["constant", "adaptive"])
 def test_resume_is_bit_exact(tmp_path: Path, schedule: str):
     params = small_params(

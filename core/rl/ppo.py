@@ -286,6 +286,9 @@ class PPOTrainer(Trainer):
                 raise ValueError(f"{ckpt_path}: not a PPO checkpoint (format {ck.get('format')!r})")
             model.load_state_dict(ck["model"])
             optimizer.load_state_dict(ck["optimizer"])
+            if p.lr_schedule == "constant":  # the spec's rate, not the one saved by a run with another schedule
+                for group in optimizer.param_groups:
+                    group["lr"] = p.lr
             mine = _own_state(ck, dist.rank())
             if mine is not None:
                 env.load_state_dict(mine["env"])
