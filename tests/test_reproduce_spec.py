@@ -22,8 +22,9 @@ def test_reproduce_spec_trains_everything_and_shares_the_imitator():
     committed = {p.parent.name for p in (ROOT / "checkpoints").glob("*/*.pt")}
     latents = {f"{r.spec.latent.name}_amp" for r in cells.values() if r.spec.latent is not None}
     # imitator _v2: the same recipe trained further; vmp_amp: an earlier recipe, superseded by vmp_amp_v2;
-    # vmp_amp_m: the M-conditioning ablation of the vmp cell (test below)
-    covered = {"imitator_amp", "imitator_amp_v2", "vmp_amp_v2", "vmp_amp_m"} | latents
+    # vmp_amp_m: the M-conditioning ablation of the vmp cell; pulse_amp_v2: the pulse recipe with the
+    # _v2 imitator as the teacher (tests below)
+    covered = {"imitator_amp", "imitator_amp_v2", "vmp_amp_v2", "vmp_amp_m", "pulse_amp_v2"} | latents
     assert committed <= covered, f"committed checkpoints without a cell: {committed - covered}"
     keys = {name: stage_keys(r.spec) for name, r in cells.items()}
     assert len({k["imitator"] for k in keys.values()}) == 1  # one imitator artifact for all cells
@@ -49,3 +50,15 @@ def test_vmp_m_ablation_differs_from_the_vmp_recipe_only_by_conditioning():
     assert m["trainer"]["params"]["tracker"]["conditioning"] == "M"
     m["trainer"]["params"]["tracker"]["conditioning"] = "LM"
     assert m == lm
+
+
+def test_pulse_v2_differs_from_the_pulse_recipe_only_by_its_teacher():
+    plugins = get_plugins()
+    v1 = load_spec(ROOT / "specs" / "latent" / "pulse_amp.yaml", plugins).spec
+    v2 = load_spec(ROOT / "specs" / "latent" / "pulse_amp_v2.yaml", plugins).spec
+    assert v1.latent.model_dump() == v2.latent.model_dump()
+    assert Path(v1.imitator.checkpoint).parent.name == "imitator_amp"
+    assert Path(v2.imitator.checkpoint).parent.name == "imitator_amp_v2"
+    a, b = v1.imitator.model_dump(), v2.imitator.model_dump()
+    a.pop("checkpoint"), b.pop("checkpoint")
+    assert a == b
