@@ -132,15 +132,11 @@ def evaluate_recovery(
     """Run the protocol (module docstring) with ``policy`` (``observe(state, ref)`` / ``act(obs)``)."""
     p = params
     n = p.trials
-    if p.reference == "still":
-        if p.clip is not None:
-            clip = pick_clip(list(library.clip_names), [bool(x) for x in library.loops.tolist()], p.clip)
-            t_still = float(library.durations[clip])
-        else:
-            clip, t_still = pick_still_frame(library)
+    if p.reference == "still" and p.clip is None:
+        clip, t_still = pick_still_frame(library)
     else:
         clip = pick_clip(list(library.clip_names), [bool(x) for x in library.loops.tolist()], p.clip)
-        t_still = math.nan
+        t_still = float(library.durations[clip]) if p.reference == "still" else math.nan
     gen = torch.Generator().manual_seed(int(p.seed))
     sim = make_sim(n)
     try:
