@@ -71,10 +71,12 @@ def register_commands(app: Any) -> None:
         plugins = get_plugins()
         info = load_evaluation_target(target, plugins)
         loaded = build_evaluation_target(info, plugins, use_latent=not imitator_only)
-        if reference not in ("still", "clip"):
-            from mocap.cli import UserError
+        from mocap.cli import UserError
 
+        if reference not in ("still", "clip"):
             raise UserError(f"--reference must be 'still' or 'clip', not {reference!r}")
+        if clip is not None and clip not in loaded.library.clip_names:
+            raise UserError(f"--clip: no clip {clip!r} in the motion set (clips: {', '.join(loaded.library.clip_names)})")
         params = RecoveryEvalParams(trials=trials, seconds=seconds, reference=reference, clip=clip, far_prob=far_prob, seed=seed)
         recorder = None
         if video is not None:
