@@ -400,3 +400,56 @@ def test_pmcp_primitive0_from_a_trained_imitator(straight, tmp_path):
     bad.write_text(spec.read_text().replace("actor_hidden: [16], critic_hidden: [16], checkpoint_every: 2}", "actor_hidden: [8], critic_hidden: [16], checkpoint_every: 2}", 1))
     result = invoke(["run", bad, "--out", tmp_path / "runs" / "b"])
     assert result.exit_code != 0 and "does not fit this imitator" in result.output and "Traceback" not in result.output
+
+
+GETUP_SPEC = RECOVERY_SPEC.replace(
+    " composer_fail_states:",
+    " getup: {env_steps: 128, fail_states: {fall_init_prob: 1.0, pool_size: 4, settle_steps: 10},"
+    " imitator: {amp: true, task_reward_weight: 0.0, amp_reward_weight: 1.0, amp_hidden: [16], amp_batch: 8}},"
+    " composer_fail_states:",
+)
+
+
+def test_pmcp_getup_phase_runs_before_the_point_goal_phase(tmp_path):
+    """[C]'s AMP-only get-up phase: trained first (fallen starts, AMP on), then P(F) starts from it."""
+    from mocap.testing import invoke
+
+    assert "getup:" in GETUP_SPEC
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(GETUP_SPEC)
+    result = invoke(["run", spec, "--out", tmp_path / "runs" / "r"])
+    assert result.exit_code == 0, result.output
+    final = Path(json.loads((tmp_path / "runs" / "r" / "stages.json").read_text())[0]["checkpoint"])
+    work = final.parent
+    pf = json.loads((work / "pmcp_state.json").read_text())["primitives"][1]
+    assert pf["recovery"] is True and pf["getup"]["status"] == "done" and pf["getup"]["env_steps"] >= 128
+    getup_env = load_checkpoint(work / "prim1_getup" / "ppo.pt")["env"]["inner"]
+    pf_env = load_checkpoint(work / "prim1" / "ppo.pt")["env"]["inner"]
+    assert "amp" in getup_env and "amp" not in pf_env  # the discriminator lives in the get-up phase only
+    assert (work / "prim1_getup" / "primitive.pt").is_file()
+    lines = [json.loads(x) for x in (tmp_path / "runs" / "r" / "metrics.jsonl").read_text().splitlines() if x.strip()]
+    getup_lines = [x for x in lines if x.get("stage") == "imitator/prim1_getup"]
+    # task weight 0, AMP weight 1 (energy_coef 0 here): the reward is the AMP reward alone
+    assert getup_lines and all(x["reward_mean"] == pytest.approx(x["env/reward/amp"], rel=1e-5) for x in getup_lines)
+    assert any(x["env/reward/task"] > 0 for x in getup_lines)
+    assert "get-up phase" in (tmp_path / "runs" / "r" / "pmcp.md").read_text()
+
+
+def test_pmcp_getup_params_are_the_codes_phase_one():
+    from mocap_phc.imitator import PHCParams
+    from mocap_phc.pmcp import GetupPhaseParams, PMCPParams, PMCPTrainer, RecoveryPhaseParams
+
+    g = GetupPhaseParams()
+    assert g.fail_states.fall_init_prob == 1.0 and g.fail_states.far_init_prob == 0.0 and g.fail_states.recovery_episode_prob == 0.0
+    overrides = {"amp": True, "task_reward_weight": 0.0, "amp_reward_weight": 1.0, "amp_hidden": [8]}
+    trainer = PMCPTrainer(PMCPParams(recovery=RecoveryPhaseParams(getup=GetupPhaseParams(imitator=overrides))))
+    trainer.component = type("C", (), {"params": PHCParams(recovery_goal={"form": "paper"}, energy_coef=0.0)})()
+    got = trainer._getup_params()
+    assert isinstance(got, PHCParams)
+    assert got.amp and got.task_reward_weight == 0.0 and got.amp_reward_weight == 1.0 and got.amp_hidden == [8]
+    assert got.fail_states is not None and got.fail_states.fall_init_prob == 1.0
+    assert got.recovery_goal is not None and got.recovery_goal.form == "paper"
+    bad = PMCPTrainer(PMCPParams(recovery=RecoveryPhaseParams(getup=GetupPhaseParams(imitator={"amp_lr": -1.0}))))
+    bad.component = trainer.component
+    with pytest.raises(ValidationError):  # overrides are validated as the imitator's params
+        bad._getup_params()

@@ -55,9 +55,12 @@ the end of its budget and the composer mixes K + 1 primitives, trained with fail
 interleaved (``composer_fail_states``). It needs the imitator's ``recovery_goal`` (Eq. 3's goal
 switch), which then applies to every primitive. ``mocap recover`` measures the recovery rate.
 
-Not implemented (see the digest): the code's separate AMP-only get-up phase of P(F) (configure
-``recovery.fail_states`` for it instead); PNN lateral connections; carrying an AMP discriminator from one primitive to the next
-(with ``amp`` on, each phase starts a new discriminator).
+With ``recovery.getup`` set, P(F) first runs [C]'s AMP-only get-up phase (in ``prim{k}_getup/``:
+fallen starts only, task weight 0, AMP weight 1, initialized from the last imitation primitive) and
+the point-goal phase starts from its weights.
+
+Not implemented (see the digest): PNN lateral connections; carrying an AMP discriminator from one
+phase to the next (with ``amp`` on, each phase starts a new discriminator).
 """
 
 from __future__ import annotations
@@ -93,6 +96,35 @@ def _recovery_fail_default() -> FailStateParams:
     return FailStateParams(fall_init_prob=0.3, far_init_prob=0.3, recovery_episode_prob=0.5)
 
 
+def _getup_fail_default() -> FailStateParams:
+    return FailStateParams(fall_init_prob=1.0, far_init_prob=0.0, recovery_episode_prob=0.0)
+
+
+def _getup_imitator_default() -> dict[str, Any]:
+    return {"amp": True, "task_reward_weight": 0.0, "amp_reward_weight": 1.0}
+
+
+class GetupPhaseParams(BaseModel):
+    """[C]'s first P(F) phase (``getup_schedule`` before ``getup_udpate_epoch``; digest phc §4.4): pure
+    AMP get-up learning from fallen states. The paper does not mention it; the official code runs
+    it for about 8e4 of its ~1e5 epochs before the point-goal phase."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    env_steps: int = Field(2_000_000, ge=1, description="env-step budget of the get-up phase (rounded up to whole PPO iterations)")
+    fail_states: FailStateParams = Field(
+        default_factory=_getup_fail_default,
+        description="episode starts ([C] phase 1: every reset from a stored fallen state, fallInitProb 1, no far starts, "
+        "no bonus recovery episodes; each start has the recovery window, after which tracking failures end the episode)",
+    )
+    imitator: dict[str, Any] = Field(
+        default_factory=_getup_imitator_default,
+        description="imitator params changed for this phase only (validated as the imitator's params): by default the AMP "
+        "reward on with task weight 0 and AMP weight 1 ([C] phase 1); e.g. amp_hidden for a CPU-sized discriminator. "
+        "The discriminator starts fresh and is not carried into the point-goal phase",
+    )
+
+
 class RecoveryPhaseParams(BaseModel):
     """The fail-state recovery primitive P(F) (PHC §4.4 / digest phc §4.4, §4.6)."""
 
@@ -107,8 +139,12 @@ class RecoveryPhaseParams(BaseModel):
     fail_states: FailStateParams = Field(
         default_factory=_recovery_fail_default,
         description="episode starts of P(F): fallen / far starts and bonus recovery episodes ([C] phase 2: fallInitProb 0.3, "
-        "recoveryEpisodeProb 0.5; [P] far starts 2-5 m). [C]'s phase 1 (AMP-only get-up with fallInitProb 1) is not a "
-        "separate phase here: run it as its own stage with these fields if wanted",
+        "recoveryEpisodeProb 0.5; [P] far starts 2-5 m); [C]'s phase 1 is ``getup``",
+    )
+    getup: GetupPhaseParams | None = Field(
+        None,
+        description="first train P(F) in [C]'s AMP-only get-up phase (fallen starts only), then the point-goal phase "
+        "above starts from its weights; None: no get-up phase ([P] mentions none)",
     )
     composer_fail_states: FailStateParams | None = Field(
         default_factory=_recovery_fail_default,
@@ -668,6 +704,12 @@ class PMCPTrainer(Trainer):
                 return self._stopped(state)
         if state["phase"] == "recovery":
             prim = state["primitives"][-1]
+            getup = prim.get("getup")
+            if getup is None and self.params.recovery is not None and self.params.recovery.getup is not None and prim["status"] == "training":
+                getup = prim["getup"] = {"status": "training", "budget_env_steps": int(self.params.recovery.getup.env_steps)}
+                self._save_state(state)
+            if getup is not None and getup["status"] == "training" and not self._train_primitive(state, prim, getup=True):
+                return self._stopped(state)
             if prim["status"] == "training" and not self._train_primitive(state, prim):
                 return self._stopped(state)
             state["phase"] = "composer"
@@ -724,20 +766,33 @@ class PMCPTrainer(Trainer):
         self._save_state(state)
         ctx.console.print(f"pmcp: primitive 0 given ({source}): success {ev['success_rate']:.2f} on its {len(ids)} clip(s)")
 
-    def _train_primitive(self, state: dict[str, Any], prim: dict[str, Any]) -> bool:
-        """Train primitive ``prim`` until it should be frozen; freeze it. False when stopped by the user."""
+    def _getup_params(self) -> Any:
+        """The imitator's params for [C]'s get-up phase: its fallen starts and imitator overrides."""
+        rec = self.params.recovery
+        assert rec is not None and rec.getup is not None
+        base = self._recovery_params(rec.getup.fail_states)
+        return type(base).model_validate({**base.model_dump(), **rec.getup.imitator})
+
+    def _train_primitive(self, state: dict[str, Any], prim: dict[str, Any], getup: bool = False) -> bool:
+        """Train primitive ``prim`` until it should be frozen; freeze it. False when stopped by the user.
+        ``getup``: run P(F)'s get-up phase instead (``prim["getup"]``, directory ``prim{k}_getup``)."""
         p, ctx = self.params, self.ctx
         k, ids = int(prim["index"]), list(prim["clip_ids"])
         if k == 0 and p.primitive0 is not None:
             self._given_primitive(state, prim)
             return True
-        phase_dir = self.workdir / f"prim{k}"
-        seed = self._phase_seed(k)
+        phase = f"prim{k}_getup" if getup else f"prim{k}"
+        phase_dir = self.workdir / phase
+        seed = self._phase_seed(k) + (104729 if getup else 0)
         holder: dict[str, PrimitiveEnv] = {}
         recovery = bool(prim.get("recovery"))
-        env_params = self._recovery_params(p.recovery.fail_states) if recovery and p.recovery is not None else None
+        if getup:
+            env_params = self._getup_params()
+        else:
+            env_params = self._recovery_params(p.recovery.fail_states) if recovery and p.recovery is not None else None
         # P(F) trains for its whole budget: its job (getting up, coming back) is not what the plateau evaluation measures
         patience, stop = (0, False) if recovery else (p.plateau_evals, p.stop_on_success)
+        record = prim["getup"] if getup else prim
 
         def make_env(n: int) -> PrimitiveEnv:
             env = PrimitiveEnv(self._imitation_env(ids, n, seed, env_params), p.eval_every, patience, stop)
@@ -745,17 +800,18 @@ class PMCPTrainer(Trainer):
             return env
 
         init = None
-        if k > 0 and p.init == "copy":
-            source = load_policy(self.workdir / f"prim{k - 1}" / PRIMITIVE_NAME)
+        after_getup = recovery and not getup and prim.get("getup") is not None
+        if after_getup or (k > 0 and p.init == "copy"):
+            source = load_policy(self.workdir / (f"prim{k}_getup" if after_getup else f"prim{k - 1}") / PRIMITIVE_NAME)
 
             def init(model: ActorCritic) -> None:
                 model.load_state_dict(source.state_dict())
 
-        ppo_params = p.ppo.model_copy(update={"total_env_steps": max(1, int(prim["budget_env_steps"]))})
-        log = _PhaseLog(ctx.log, f"prim{k}")
+        ppo_params = p.ppo.model_copy(update={"total_env_steps": max(1, int(record["budget_env_steps"]))})
+        log = _PhaseLog(ctx.log, phase)
         sub = _PhaseContext(ctx, phase_dir, seed, make_env, log, lambda: "env" in holder and holder["env"].done)
         names = [self.clip_names[i] for i in ids]
-        what = "recovery primitive P(F)" if recovery else "primitive"
+        what = "get-up phase of P(F)" if getup else ("recovery primitive P(F)" if recovery else "primitive")
         ctx.console.print(f"pmcp: {what} {k} on {len(ids)} clip(s): {', '.join(names[:8])}{' ...' if len(names) > 8 else ''}")
         try:
             result = _SeededPPO(ppo_params, init).run(sub)
@@ -769,8 +825,16 @@ class PMCPTrainer(Trainer):
             return False  # the user stopped; PPO saved ppo.pt
         model = load_policy(result.checkpoint)
         save_policy(
-            phase_dir / PRIMITIVE_NAME, model, extra={"trainer": "pmcp", "primitive": k, "clips": names, "recovery": recovery}, spec_yaml=ctx.spec_yaml()
+            phase_dir / PRIMITIVE_NAME,
+            model,
+            extra={"trainer": "pmcp", "primitive": k, "clips": names, "recovery": recovery, "getup": getup},
+            spec_yaml=ctx.spec_yaml(),
         )
+        if getup:
+            record.update({"status": "done", "iterations": int(ck["iteration"]), "env_steps": int(ck["env_steps"])})
+            self._save_state(state)
+            ctx.console.print(f"pmcp: get-up phase of P(F) done after {int(ck['env_steps']):,} env steps")
+            return True
 
         def policy_fn(obs: Tensor) -> Tensor:
             with torch.no_grad():
@@ -930,8 +994,12 @@ def pmcp_report(state: dict[str, Any], params: PMCPParams) -> str:
     for pr in prims:
         ev = pr.get("evaluation") or {}
         rate = ev.get("success_rate")
+        getup = pr.get("getup")
+        tag = " (recovery)" if pr.get("recovery") else ""
+        if getup is not None:
+            tag = f" (recovery, after a get-up phase of {getup.get('env_steps', '-')} env steps)"
         lines.append(
-            f"| {pr['index']}{' (recovery)' if pr.get('recovery') else ''} | {len(pr['clip_ids'])} | {pr.get('end', '-')} | {pr.get('iterations', '-')} | "
+            f"| {pr['index']}{tag} | {len(pr['clip_ids'])} | {pr.get('end', '-')} | {pr.get('iterations', '-')} | "
             f"{pr.get('env_steps', '-')} | {'-' if rate is None else f'{rate:.3f}'} |"
         )
     final = state.get("final_evaluation") or {}
