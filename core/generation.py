@@ -267,6 +267,7 @@ def evaluate_generation(
         "diversity_m": pairwise_diversity(traj),
         **matching,
         "start_clips": [lib.clip_names[int(i)] for i in ids],
+        "fall_time_s_per_rollout": [float(f) * dt if f >= 0 else None for f in first_fall.tolist()],
     }
     if recorder is not None:
         for frames in frames_by_env:

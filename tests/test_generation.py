@@ -118,6 +118,11 @@ def test_generation_stage_and_command(pulse_run, tmp_path):
         assert key in table, key
     assert 0.0 <= table["fall_rate"] <= 1.0 and 0.0 <= table["coverage"] <= 1.0 and table["num_rollouts"] == 3
     assert 0.0 < table["survival_s"] <= table["seconds"] + 1e-9 and table["diversity_m"] > 0
+    per = table["fall_time_s_per_rollout"]  # the per-rollout record agrees with the aggregate
+    assert len(per) == len(table["start_clips"]) == 3
+    assert table["fall_rate"] == pytest.approx(sum(t is not None for t in per) / 3)
+    horizon = table["seconds"]
+    assert table["survival_s"] == pytest.approx(sum(horizon if t is None else t for t in per) / 3)
     assert "Random generation" in (pulse_run / "generation.md").read_text()
     out = tmp_path / "g.json"
     result = invoke(["generate", pulse_run, "--rollouts", "2", "--seconds", "0.2", "--json", out])
