@@ -13,6 +13,7 @@ from test_distill import walk  # noqa: F401  (fixture)
 from mocap_phc.recovery import FailStateParams, generate_fall_states
 from mocap_phc.recovery_eval import (
     RecoveryEvalParams,
+    best_trial,
     evaluate_recovery,
     pick_clip,
     pick_still_frame,
@@ -89,6 +90,37 @@ def test_fallen_states_are_valid(amp):
     assert float(s.dof_vel.abs().max()) == 0.0 and float(s.root_lin_vel.abs().max()) == 0.0
 
 
+def test_best_trial_is_the_first_to_recover_else_the_closest():
+    inf = 9.0
+    err = torch.tensor([[0.0, 0.0, 0.0], [inf, 0.7, inf], [inf, 0.6, 0.4], [0.3, 0.6, 0.4]], dtype=torch.float64)
+    assert best_trial(err, 0.5) == 2  # recovers at step 2, trial 0 only at step 3; step 0 never counts
+    assert best_trial(err, 0.2) == 0  # nobody within 0.2 m: trial 0 comes closest (0.3 m)
+    assert best_trial(err[:, 1:2], 0.5) == 0
+
+
+@given(st.integers(2, 6), st.integers(1, 8), st.integers(0, 2**31 - 1))
+def test_best_trial_properties(t, n, seed):
+    g = torch.Generator().manual_seed(seed)
+    err = torch.rand(t, n, generator=g, dtype=torch.float64)
+    i = best_trial(err, 0.5)
+    hit = err[1:] <= 0.5
+    if bool(hit.any()):
+        first = [int(hit[:, j].float().argmax()) if bool(hit[:, j].any()) else t for j in range(n)]
+        assert bool(hit[:, i].any()) and first[i] == min(first)
+    else:
+        assert float(err[1:, i].min()) == float(err[1:].min())
+
+
+class _Frames:
+    """A recorder that keeps what it is given."""
+
+    def __init__(self):
+        self.frames = []
+
+    def add_frame(self, pose, ghost=None):
+        self.frames.append((pose, ghost))
+
+
 @pytest.mark.parametrize("reference", ["still", "clip"])
 def test_evaluate_recovery_with_a_policy_that_never_gets_up(amp, walk, reference):  # noqa: F811
     from mocap.motion.library import MotionLibrary
@@ -106,8 +138,15 @@ def test_evaluate_recovery_with_a_policy_that_never_gets_up(amp, walk, reference
     assert res["recovery_rate"] == 0.0 and res["root_back_rate"] <= 0.5  # lying still: never back on the reference
     assert res["fallen_near_trials"] + res["fallen_far_trials"] == 4
     assert res["start_root_height_m"] < 0.5
-    again = evaluate_recovery(HoldPose(amp.num_dofs), lib, make_sim, amp, params)
-    assert again == res  # seeded: the same fallen states and offsets
+    rec = _Frames()
+    again = evaluate_recovery(HoldPose(amp.num_dofs), lib, make_sim, amp, params, recorder=rec, video_trial="best")
+    assert {k: v for k, v in again.items() if not k.startswith("video_trial")} == res  # seeded: the same fallen states and offsets
+    assert len(rec.frames) == round(0.3 * 30) and 0 <= again["video_trial"] < 4
+    assert again["video_trial_min_error_m"] > 0.5  # it never got up
+    (rp, rr, dp), (gp, gr, gd) = rec.frames[-1]
+    assert rp.shape == (3,) and rr.shape == (4,) and dp.shape == (amp.num_dofs,) and gd.shape == (amp.num_dofs,)
+    with pytest.raises(ValueError, match="video trial"):
+        evaluate_recovery(HoldPose(amp.num_dofs), lib, make_sim, amp, params, recorder=_Frames(), video_trial=4)
 
 
 @pytest.fixture(scope="module")

@@ -52,7 +52,10 @@ def register_commands(app: Any) -> None:
         far_prob: Annotated[float, typer.Option("--far-prob", help="share of trials also 2-5 m away from the reference")] = 0.5,
         seed: Annotated[int, typer.Option("--seed")] = 0,
         json_out: Annotated[Optional[Path], typer.Option("--json", help="write the result as JSON")] = None,
-        video: Annotated[Optional[Path], typer.Option("--video", help="write a video of trial 0 (reference as a ghost)")] = None,
+        video: Annotated[Optional[Path], typer.Option("--video", help="write a video of one trial (reference as a ghost)")] = None,
+        video_trial: Annotated[
+            str, typer.Option("--video-trial", help="the trial --video shows: an index, or 'best' (the first to recover, else the closest)")
+        ] = "0",
         imitator_only: Annotated[
             bool, typer.Option("--imitator-only", help="for a latent space: evaluate the imitator it was distilled from")
         ] = False,
@@ -77,6 +80,8 @@ def register_commands(app: Any) -> None:
             raise UserError(f"--reference must be 'still' or 'clip', not {reference!r}")
         if clip is not None and clip not in loaded.library.clip_names:
             raise UserError(f"--clip: no clip {clip!r} in the motion set (clips: {', '.join(loaded.library.clip_names)})")
+        if video_trial != "best" and not (video_trial.isdigit() and int(video_trial) < trials):
+            raise UserError(f"--video-trial must be 'best' or a trial index below --trials ({trials}), not {video_trial!r}")
         params = RecoveryEvalParams(trials=trials, seconds=seconds, reference=reference, clip=clip, far_prob=far_prob, seed=seed)
         recorder = None
         if video is not None:
@@ -87,7 +92,7 @@ def register_commands(app: Any) -> None:
             task = bar.add_task("recovery rollouts", total=int(round(seconds * 30)))
             res = evaluate_recovery(
                 loaded.policy, loaded.library, loaded.make_sim, loaded.skeleton, params, recorder=recorder,
-                progress=lambda: bar.advance(task),
+                progress=lambda: bar.advance(task), video_trial=video_trial if video_trial == "best" else int(video_trial),
             )
         res["evaluated"] = str(target)
         if recorder is not None and video is not None:

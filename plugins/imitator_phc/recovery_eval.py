@@ -119,6 +119,16 @@ def recovery_summary(err: torch.Tensor, root_dist: torch.Tensor, dt: float, thre
     }
 
 
+def best_trial(err: torch.Tensor, threshold: float) -> int:
+    """The trial to show: the earliest to come within ``threshold`` of the reference (mean body
+    error, ``err`` (T, N) with step 0 the start), or, when none does, the one that comes closest."""
+    hit = err[1:] <= threshold
+    if bool(hit.any()):
+        first = torch.where(hit.any(0), hit.float().argmax(0), torch.full((err.shape[1],), err.shape[0], dtype=torch.long))
+        return int(first.argmin())
+    return int(err[1:].min(0).values.argmin())
+
+
 def evaluate_recovery(
     policy: Any,
     library: Any,
@@ -128,8 +138,12 @@ def evaluate_recovery(
     *,
     recorder: Any = None,
     progress: Callable[[], None] | None = None,
+    video_trial: int | str = 0,
 ) -> dict[str, Any]:
-    """Run the protocol (module docstring) with ``policy`` (``observe(state, ref)`` / ``act(obs)``)."""
+    """Run the protocol (module docstring) with ``policy`` (``observe(state, ref)`` / ``act(obs)``).
+
+    ``recorder`` (``add_frame(pose, ghost=pose)``) gets trial ``video_trial``'s rollout with the
+    reference as the ghost: a trial index, or ``"best"`` (:func:`best_trial`)."""
     p = params
     n = p.trials
     if p.reference == "still" and p.clip is None:
@@ -159,6 +173,11 @@ def evaluate_recovery(
         state = sim.state
         steps = round(p.seconds / dt)
         errs, roots = [], []
+        poses: list[tuple[torch.Tensor, ...]] = []
+
+        def keep(state: Any, ref: Any) -> None:
+            if recorder is not None:
+                poses.append(tuple(x.detach().cpu().clone() for x in (state.root_pos, state.root_rot, state.dof_pos, ref.root_pos, ref.root_rot, ref.dof_pos)))
 
         def measure(state: Any, ref: Any) -> None:
             sp, rp = state.body_pos.double().cpu(), ref.body_pos.double().cpu()
@@ -172,14 +191,21 @@ def evaluate_recovery(
                 actions = policy.act(policy.observe(state, ref))
             state = sim.step(actions)
             measure(state, ref)
-            if recorder is not None:
-                recorder.add_frame(state, ghost=ref)
+            keep(state, ref)
             if progress is not None:
                 progress()
     finally:
         sim.close()
     err, root = torch.stack(errs), torch.stack(roots)
     out = recovery_summary(err, root, dt, p.threshold)
+    if recorder is not None:
+        i = best_trial(err, p.threshold) if video_trial == "best" else int(video_trial)
+        if not 0 <= i < n:
+            raise ValueError(f"video trial {i} out of range (0..{n - 1})")
+        for rp, rr, dp, grp, grr, gdp in poses:
+            recorder.add_frame((rp[i], rr[i], dp[i]), ghost=(grp[i], grr[i], gdp[i]))
+        out["video_trial"] = i
+        out["video_trial_min_error_m"] = float(err[1:, i].min())
     far_l = far.tolist()
     rec = out.pop("recovered")
     for name, sel in (("fallen_near", [not f for f in far_l]), ("fallen_far", far_l)):
@@ -203,4 +229,4 @@ def evaluate_recovery(
     return out
 
 
-__all__ = ["PROTOCOL", "RecoveryEvalParams", "evaluate_recovery", "pick_clip", "pick_still_frame", "recovery_summary", "still_reference"]
+__all__ = ["PROTOCOL", "RecoveryEvalParams", "best_trial", "evaluate_recovery", "pick_clip", "pick_still_frame", "recovery_summary", "still_reference"]
