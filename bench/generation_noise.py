@@ -24,22 +24,24 @@ import time
 from pathlib import Path
 
 
-def run_one(target: Path, noise: float, rollouts: int, seconds: float, seed: int) -> dict:
+def load(target: Path):
+    """The built evaluation target of a latent checkpoint (loaded once, rolled out at every scale)."""
     from mocap.evaluation import build_evaluation_target, load_evaluation_target
-    from mocap.generation import GenerationParams, evaluate_generation
     from mocap.plugins import get_plugins
 
     plugins = get_plugins()
     info = load_evaluation_target(target, plugins)
     if info.latent_checkpoint is None:
         raise SystemExit(f"{target}: not a latent space")
-    loaded = build_evaluation_target(info, plugins)
-    own = bool(getattr(loaded.latent, "decodes_pd_targets", False))
-    imitator = None if own else loaded.imitator
-    mapping = (lambda obs, out: out) if own else loaded.to_pd_targets
+    return build_evaluation_target(info, plugins)
+
+
+def run_one(loaded, target: Path, noise: float, rollouts: int, seconds: float, seed: int) -> dict:
+    from mocap.generation import GenerationParams, generate_from_target
+
     params = GenerationParams(num_rollouts=rollouts, seconds=seconds, noise_scale=noise, seed=seed)
     t0 = time.perf_counter()
-    result = evaluate_generation(loaded.latent, imitator, mapping, loaded.library, loaded.make_sim, params)
+    result = generate_from_target(loaded, params)
     result["wall_s"] = time.perf_counter() - t0
     result["by_start_clip"] = by_start_clip(result["start_clips"], result["fall_time_s_per_rollout"])
     result["noise_scale"] = noise
@@ -96,8 +98,9 @@ def main() -> None:
     torch.set_num_threads(args.threads)
     records = []
     for ck in args.checkpoints:
+        loaded = load(ck)
         for s in args.noise:
-            r = run_one(ck, s, args.rollouts, args.seconds, args.seed)
+            r = run_one(loaded, ck, s, args.rollouts, args.seconds, args.seed)
             print(f"{ck} noise {s:g}: fall {r['fall_rate']:.3f} after {r['time_to_fall_s']:.2f} s, diversity {r['diversity_m']:.2f} m, match {r['match_distance']:.1f}")
             records.append({k: v for k, v in r.items() if k != "video"})
     args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -60,7 +60,7 @@ def main() -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    stages = [s for s in curves if s.split("/")[-1] != ""]
+    stages = [s for s in curves if s]  # lines without a stage label are not a phase
     keys = [k for k in KEYS if any(k in curves[s] for s in stages)]
     fig, axes = plt.subplots(1, len(keys), figsize=(3.2 * len(keys), 3.0), squeeze=False)
     for ax, k in zip(axes[0], keys):

@@ -278,6 +278,14 @@ def evaluate_generation(
     return result
 
 
+def generate_from_target(loaded: Any, params: GenerationParams, *, video: Path | None = None, console: Any = None) -> dict[str, Any]:
+    """:func:`evaluate_generation` of a built evaluation target (``mocap.evaluation.build_evaluation_target``)."""
+    own = bool(getattr(loaded.latent, "decodes_pd_targets", False))  # VMP: random_action gives PD targets
+    imitator = None if own else loaded.imitator
+    mapping = (lambda obs, out: out) if own else loaded.to_pd_targets
+    return evaluate_generation(loaded.latent, imitator, mapping, loaded.library, loaded.make_sim, params, video=video, console=console)
+
+
 # ------------------------------------------------------------------------------ registration
 class GenerationEval:
     """Trainer ``generation_eval``: :func:`evaluate_generation` of the spec's trained latent space;
@@ -389,11 +397,8 @@ def register_commands(app):  # type: ignore[no-untyped-def]
             raise UserError(f"{target}: not a latent space (generation samples a latent space's prior)")
         loaded = build_evaluation_target(target_info, plugins)
         params = GenerationParams(num_rollouts=rollouts, seconds=seconds, noise_scale=noise, seed=seed)
-        own = bool(getattr(loaded.latent, "decodes_pd_targets", False))  # VMP: random_action gives PD targets
-        imitator = None if own else loaded.imitator
-        mapping = (lambda obs, out: out) if own else loaded.to_pd_targets
         try:
-            result = evaluate_generation(loaded.latent, imitator, mapping, loaded.library, loaded.make_sim, params, video=video, console=console)
+            result = generate_from_target(loaded, params, video=video, console=console)
         except ValueError as exc:
             raise UserError(str(exc)) from None
         result["checkpoint"] = str(target_info.latent_checkpoint)
@@ -412,6 +417,7 @@ __all__ = [
     "render_generation",
     "dataset_transitions",
     "evaluate_generation",
+    "generate_from_target",
     "fallen_down",
     "heading_frame",
     "in_start_frame",
