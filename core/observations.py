@@ -40,7 +40,7 @@ from typing import Literal
 import torch
 from torch import Tensor
 
-from mocap.rotations import heading_quat, heading_quat_inv, quat_apply, quat_conjugate, quat_mul, quat_to_matrix, quat_to_sixd
+from mocap.rotations import heading_quat, heading_quat_inv, quat_apply, quat_to_matrix, quat_to_sixd
 from mocap.state import HumanoidState
 
 SixD = Literal["zhou", "tan_norm"]
@@ -111,10 +111,41 @@ def rotation_sixd(q: Tensor, sixd: SixD = "zhou") -> Tensor:
     raise ValueError(f"unknown 6-D convention {sixd!r}; choose one of {', '.join(SIXD_CHOICES)}")
 
 
-def _heading_inv(state: HumanoidState, num_bodies: int) -> Tensor:
-    """(N, B, 4) the inverse heading quaternion of each env's root, repeated per body."""
-    h_inv = heading_quat_inv(state.root_rot)
-    return h_inv[:, None, :].expand(-1, num_bodies, -1)
+def heading_cos_sin(root_rot: Tensor) -> tuple[Tensor, Tensor]:
+    """(N,) cosine and sine of the heading angle of ``root_rot`` (N, 4)
+    (:func:`~mocap.rotations.heading_angle` without the ``atan2``): the rotated x axis projected on
+    the xy plane, normalized; ``(1, 0)`` when it points straight up or down."""
+    w, x, y, z = root_rot.unbind(-1)
+    hx = w * w + x * x - y * y - z * z
+    hy = 2.0 * (x * y + w * z)
+    r = torch.sqrt(hx * hx + hy * hy)
+    flat = r <= 1e-12 * (w * w + x * x + y * y + z * z)
+    c = torch.where(flat, torch.ones_like(r), hx / torch.where(flat, torch.ones_like(r), r))
+    s = torch.where(flat, torch.zeros_like(r), hy / torch.where(flat, torch.ones_like(r), r))
+    return c, s
+
+
+def heading_inv_matrix_t(root_rot: Tensor) -> Tensor:
+    """(N, 3, 3) ``R(h^-1)^T``: ``v @ heading_inv_matrix_t(root_rot)[:, None]`` rotates row vectors
+    (N, ..., 3) into the heading frame (one batched matmul for any number of vectors)."""
+    c, s = heading_cos_sin(root_rot)
+    zero, one = torch.zeros_like(c), torch.ones_like(c)
+    # R(h^-1) = [[c, s, 0], [-s, c, 0], [0, 0, 1]]; rows of the result are v . (row_i), so the
+    # right-multiplied matrix is its transpose
+    return torch.stack((torch.stack((c, -s, zero), -1), torch.stack((s, c, zero), -1), torch.stack((zero, zero, one), -1)), -2)
+
+
+def _to_heading(rt: Tensor, v: Tensor) -> Tensor:
+    """Row vectors ``v`` (N, K, 3) in the heading frame given ``rt`` = :func:`heading_inv_matrix_t`."""
+    return torch.bmm(v, rt)
+
+
+def _sixd_columns(sixd: SixD) -> tuple[int, int]:
+    if sixd == "zhou":
+        return (0, 1)
+    if sixd == "tan_norm":
+        return (0, 2)
+    raise ValueError(f"unknown 6-D convention {sixd!r}; choose one of {', '.join(SIXD_CHOICES)}")
 
 
 def _check_bodies(state: HumanoidState) -> int:
@@ -124,20 +155,49 @@ def _check_bodies(state: HumanoidState) -> int:
 
 
 # ------------------------------------------------------------------------------- proprioception
+# Implementation note (speed): every heading-frame quantity is a yaw rotation of vectors, so the
+# vectors of one observation are gathered into one (N, K, 3) array and rotated by ONE batched
+# matmul; a 6-D rotation feature is two columns of a rotation matrix, i.e. two more vectors. The
+# quaternion formulas of the module docstring are the specification; tests/test_observations.py
+# checks this implementation against them.
+def _proprio_from(state: HumanoidState, rt: Tensor, sim_mat: Tensor, sixd: SixD) -> Tensor:
+    N, B = state.body_pos.shape[:2]
+    cols = _sixd_columns(sixd)
+    rel = state.body_pos[:, 1:] - state.root_pos[:, None, :]
+    rot = sim_mat[..., list(cols)].transpose(-1, -2).reshape(N, 2 * B, 3)  # per body: column a, column b
+    v = torch.cat((rel, rot, state.body_lin_vel, state.body_ang_vel), dim=1)
+    return torch.cat((state.root_pos[:, 2:3], _to_heading(rt, v).reshape(N, -1)), dim=-1)
+
+
 def proprioception(state: HumanoidState, sixd: SixD = "zhou") -> Tensor:
     """PHC's s^p (module doc): (N, 15 B - 2) in the simulated root's heading frame."""
-    B = _check_bodies(state)
-    N = state.body_pos.shape[0]
-    h_inv = _heading_inv(state, B)
-    root_h = state.root_pos[:, 2:3]
-    rel = quat_apply(h_inv[:, 1:], state.body_pos[:, 1:] - state.root_pos[:, None, :])
-    rot = rotation_sixd(quat_mul(h_inv, state.body_rot), sixd)
-    lin = quat_apply(h_inv, state.body_lin_vel)
-    ang = quat_apply(h_inv, state.body_ang_vel)
-    return torch.cat((root_h, rel.reshape(N, -1), rot.reshape(N, -1), lin.reshape(N, -1), ang.reshape(N, -1)), dim=-1)
+    _check_bodies(state)
+    rt = heading_inv_matrix_t(state.root_rot)
+    return _proprio_from(state, rt, quat_to_matrix(state.body_rot), sixd)
 
 
 # ---------------------------------------------------------------------------------- goal terms
+def _goal_rot_from(state: HumanoidState, ref_next: HumanoidState, rt: Tensor, sim_mat: Tensor, sixd: SixD) -> Tensor:
+    N, B = state.body_pos.shape[:2]
+    cols = list(_sixd_columns(sixd))
+    ref_mat = quat_to_matrix(ref_next.body_rot)
+    # R(h^-1 q^ q^-1 h) e_j = R(h^-1) [R(q^) R(q)^T (R(h) e_j)]; rt = R(h^-1)^T = R(h), so
+    # R(h) e_j is column j of rt
+    diff = torch.matmul(torch.matmul(ref_mat, sim_mat.transpose(-1, -2)), rt[:, None][..., cols])
+    v = torch.cat(
+        (
+            (ref_next.body_pos - state.body_pos)[:, :, None],
+            diff.transpose(-1, -2),
+            (ref_next.body_lin_vel - state.body_lin_vel)[:, :, None],
+            (ref_next.body_ang_vel - state.body_ang_vel)[:, :, None],
+            (ref_next.body_pos - state.root_pos[:, None, :])[:, :, None],
+            ref_mat[..., cols].transpose(-1, -2),
+        ),
+        dim=2,
+    )  # (N, B, 8, 3) in the layout order of ROT_GOAL_FEATURES
+    return _to_heading(rt, v.reshape(N, 8 * B, 3)).reshape(N, -1)
+
+
 def imitation_goal_rot(state: HumanoidState, ref_next: HumanoidState, sixd: SixD = "zhou") -> Tensor:
     """PHC's rotation-based goal s^{g-rot} (module doc): (N, 24 B), body-major.
 
@@ -146,18 +206,18 @@ def imitation_goal_rot(state: HumanoidState, ref_next: HumanoidState, sixd: SixD
         ref_next: the reference at t + 1 (the same bodies).
         sixd: 6-D convention of the rotation features.
     """
-    B = _check_bodies(state)
-    N = state.body_pos.shape[0]
-    h_inv = _heading_inv(state, B)
-    h = quat_conjugate(h_inv)
-    pos_diff = quat_apply(h_inv, ref_next.body_pos - state.body_pos)
-    rot_world = quat_mul(ref_next.body_rot, quat_conjugate(state.body_rot))
-    rot_diff = rotation_sixd(quat_mul(quat_mul(h_inv, rot_world), h), sixd)
-    vel_diff = quat_apply(h_inv, ref_next.body_lin_vel - state.body_lin_vel)
-    ang_diff = quat_apply(h_inv, ref_next.body_ang_vel - state.body_ang_vel)
-    ref_pos = quat_apply(h_inv, ref_next.body_pos - state.root_pos[:, None, :])
-    ref_rot = rotation_sixd(quat_mul(h_inv, ref_next.body_rot), sixd)
-    return torch.cat((pos_diff, rot_diff, vel_diff, ang_diff, ref_pos, ref_rot), dim=-1).reshape(N, -1)
+    _check_bodies(state)
+    rt = heading_inv_matrix_t(state.root_rot)
+    return _goal_rot_from(state, ref_next, rt, quat_to_matrix(state.body_rot), sixd)
+
+
+def _goal_keypoint_from(state: HumanoidState, ref_next: HumanoidState, rt: Tensor) -> Tensor:
+    N, B = state.body_pos.shape[:2]
+    v = torch.stack(
+        (ref_next.body_pos - state.body_pos, ref_next.body_lin_vel - state.body_lin_vel, ref_next.body_pos - state.root_pos[:, None, :]),
+        dim=2,
+    )
+    return _to_heading(rt, v.reshape(N, 3 * B, 3)).reshape(N, -1)
 
 
 def imitation_goal_keypoint(state: HumanoidState, ref_next: HumanoidState) -> Tensor:
@@ -165,13 +225,24 @@ def imitation_goal_keypoint(state: HumanoidState, ref_next: HumanoidState) -> Te
 
     Only reference *positions* and linear velocities are read (a keypoint reference).
     """
-    B = _check_bodies(state)
-    N = state.body_pos.shape[0]
-    h_inv = _heading_inv(state, B)
-    pos_diff = quat_apply(h_inv, ref_next.body_pos - state.body_pos)
-    vel_diff = quat_apply(h_inv, ref_next.body_lin_vel - state.body_lin_vel)
-    ref_pos = quat_apply(h_inv, ref_next.body_pos - state.root_pos[:, None, :])
-    return torch.cat((pos_diff, vel_diff, ref_pos), dim=-1).reshape(N, -1)
+    _check_bodies(state)
+    return _goal_keypoint_from(state, ref_next, heading_inv_matrix_t(state.root_rot))
+
+
+def proprioception_and_goal(
+    state: HumanoidState, ref_next: HumanoidState, kind: Literal["rot", "keypoint"] = "rot", sixd: SixD = "zhou"
+) -> tuple[Tensor, Tensor]:
+    """``(proprioception(state, sixd), imitation_goal(state, ref_next, kind, sixd))`` sharing the
+    heading rotation and the simulated bodies' rotation matrices (the policy input of every step)."""
+    _check_bodies(state)
+    rt = heading_inv_matrix_t(state.root_rot)
+    sim_mat = quat_to_matrix(state.body_rot)
+    proprio = _proprio_from(state, rt, sim_mat, sixd)
+    if kind == "rot":
+        return proprio, _goal_rot_from(state, ref_next, rt, sim_mat, sixd)
+    if kind == "keypoint":
+        return proprio, _goal_keypoint_from(state, ref_next, rt)
+    raise ValueError(f"unknown imitation goal {kind!r}; choose 'rot' or 'keypoint'")
 
 
 def imitation_goal(
@@ -211,7 +282,10 @@ __all__ = [
     "imitation_goal_keypoint_dim",
     "imitation_goal_rot",
     "imitation_goal_rot_dim",
+    "heading_cos_sin",
+    "heading_inv_matrix_t",
     "proprioception",
+    "proprioception_and_goal",
     "proprioception_dim",
     "rotation_sixd",
     "world_to_heading",

@@ -156,3 +156,56 @@ def test_heading_frame_direction_and_sixd_columns():
     torch.testing.assert_close(lin, torch.tensor([2.0, 0.0, 0.0], dtype=F64), atol=1e-12, rtol=0)
     with pytest.raises(ValueError):
         O.rotation_sixd(s.root_rot, "bogus")  # type: ignore[arg-type]
+
+
+# ------------------------------------------------ the batched-matmul implementation vs the formulas
+def _quaternion_proprioception(state: HumanoidState, sixd: str) -> torch.Tensor:
+    """s^p written term by term with quaternions, as the module docstring states it."""
+    from mocap.rotations import heading_quat_inv
+
+    n, b = state.body_pos.shape[:2]
+    h_inv = heading_quat_inv(state.root_rot)[:, None].expand(-1, b, -1)
+    rel = quat_apply(h_inv[:, 1:], state.body_pos[:, 1:] - state.root_pos[:, None, :])
+    rot = O.rotation_sixd(quat_mul(h_inv, state.body_rot), sixd)  # type: ignore[arg-type]
+    lin, ang = quat_apply(h_inv, state.body_lin_vel), quat_apply(h_inv, state.body_ang_vel)
+    return torch.cat((state.root_pos[:, 2:3], rel.reshape(n, -1), rot.reshape(n, -1), lin.reshape(n, -1), ang.reshape(n, -1)), -1)
+
+
+def _quaternion_goal_rot(state: HumanoidState, ref: HumanoidState, sixd: str) -> torch.Tensor:
+    """s^{g-rot} written term by term with quaternions (module docstring)."""
+    from mocap.rotations import heading_quat_inv, quat_conjugate
+
+    n, b = state.body_pos.shape[:2]
+    h_inv = heading_quat_inv(state.root_rot)[:, None].expand(-1, b, -1)
+    h = quat_conjugate(h_inv)
+    rot_world = quat_mul(ref.body_rot, quat_conjugate(state.body_rot))
+    parts = (
+        quat_apply(h_inv, ref.body_pos - state.body_pos),
+        O.rotation_sixd(quat_mul(quat_mul(h_inv, rot_world), h), sixd),  # type: ignore[arg-type]
+        quat_apply(h_inv, ref.body_lin_vel - state.body_lin_vel),
+        quat_apply(h_inv, ref.body_ang_vel - state.body_ang_vel),
+        quat_apply(h_inv, ref.body_pos - state.root_pos[:, None, :]),
+        O.rotation_sixd(quat_mul(h_inv, ref.body_rot), sixd),  # type: ignore[arg-type]
+    )
+    return torch.cat(parts, dim=-1).reshape(n, -1)
+
+
+@SETTINGS
+@given(seed=seeds, b=st.integers(2, 24), sixd=st.sampled_from(SIXD))
+def test_fused_observations_equal_the_quaternion_formulas(seed, b, sixd):
+    rng = np.random.default_rng(seed)
+    s, ref = random_state(rng, 5, b), random_state(rng, 5, b)
+    p, g = O.proprioception_and_goal(s, ref, "rot", sixd)
+    torch.testing.assert_close(p, _quaternion_proprioception(s, sixd), atol=1e-12, rtol=0)
+    torch.testing.assert_close(g, _quaternion_goal_rot(s, ref, sixd), atol=1e-12, rtol=0)
+    torch.testing.assert_close(O.proprioception(s, sixd), p, atol=0, rtol=0)
+    torch.testing.assert_close(O.imitation_goal_rot(s, ref, sixd), g, atol=0, rtol=0)
+    _, kp = O.proprioception_and_goal(s, ref, "keypoint", sixd)
+    torch.testing.assert_close(kp, O.imitation_goal_keypoint(s, ref), atol=0, rtol=0)
+
+
+def test_heading_of_a_vertical_x_axis_is_zero():
+    """The x axis pointing straight up: heading 0 (cos 1, sin 0), as ``heading_angle``'s atan2(0, 0)."""
+    q = quat_from_axis_angle(torch.tensor([0.0, 1.0, 0.0], dtype=F64), torch.tensor(-math.pi / 2, dtype=F64))[None]
+    c, s = O.heading_cos_sin(q)
+    assert float(c) == 1.0 and float(s) == 0.0

@@ -491,3 +491,26 @@ def test_make_env_from_stage_context(amp, clips):
     env.evaluate_clips(lambda obs: torch.zeros(obs.shape[0], amp.num_dofs))
     assert built == [("motions", None), ("simulator", 3), ("simulator", 2)]
     env.close()
+
+
+@pytest.mark.parametrize("grid", [True, False])
+def test_control_grid_starts_and_reference(amp, clips, grid):
+    """control_grid: start times are grid times j dt inside the admissible range and the step's
+    reference is the table row (= interpolation at that time); off: continuous start times."""
+    env = make_env(amp, clips, n=64, seed=3, control_grid=grid)
+    env.reset()
+    j = env.start_time / env.dt
+    on_grid = (j - j.round()).abs() < 1e-9
+    assert bool(on_grid.all()) == grid
+    assert (env.library._grid is not None) == grid
+    dur = env.library._dur64[env.clip_ids]
+    assert bool((env.start_time <= dur - env.dt * (~env.library.loops[env.clip_ids]).double() + 1e-9).all())
+    loops = env.library.loops[env.clip_ids]
+    assert bool((env.start_time[loops] < dur[loops] - 1e-9).all())  # one period: [0, duration)
+    plain = MotionLibrary(clips, amp)
+    res = env.step(torch.zeros(64, amp.num_dofs))
+    live = ~(res.terminated | res.truncated)
+    t = env.start_time + (env.progress + 1).double() * env.dt
+    expect = plain.frames(env.clip_ids, t)
+    torch.testing.assert_close(env._ref_next.body_pos[live], expect.body_pos[live], atol=2e-6, rtol=0)
+    env.close()

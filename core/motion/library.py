@@ -164,6 +164,7 @@ class MotionLibrary:
             self.clip_names.append(clip.name if seen[clip.name] == 1 else f"{clip.name}#{seen[clip.name]}")
         self._index = {n: i for i, n in enumerate(self.clip_names)}
         self._build()
+        self._grid: ControlGrid | None = None
         self.set_weights(None)
 
     # ------------------------------------------------------------------------------ precompute
@@ -353,12 +354,52 @@ class MotionLibrary:
 
     # -------------------------------------------------------------------------- interpolation
     def frames(self, clip_ids: Tensor, times: Tensor) -> MotionFrames:
-        """Reference frames of clips ``clip_ids`` (N,) at ``times`` (N,) seconds (module doc)."""
-        dev, dt = self.device, self.dtype
+        """Reference frames of clips ``clip_ids`` (N,) at ``times`` (N,) seconds (module doc).
+
+        With a control-rate grid (:meth:`use_control_grid`), rows whose time is a grid time
+        ``j dt`` (within 1e-9 s) inside the precomputed range are looked up; the others are computed."""
+        dev = self.device
         c = torch.as_tensor(clip_ids, device=dev).long().reshape(-1)
         t = torch.as_tensor(times, device=dev).to(torch.float64).reshape(-1)
         if c.shape != t.shape:
             raise ValueError(f"clip_ids {tuple(c.shape)} and times {tuple(t.shape)} must have the same length")
+        grid = self._grid
+        if grid is None or c.numel() == 0:
+            return self._frames_exact(c, t)
+        j = torch.round(t * grid.inv_dt)
+        rows = grid.offsets[c] + j.long()
+        hit = (j >= 0) & (j < grid.lengths[c].to(j)) & ((t - j * grid.dt).abs() <= 1e-9)
+        if bool(hit.all()):
+            return grid.lookup(rows, c)
+        out = grid.lookup(rows.where(hit, torch.zeros_like(rows)), c)
+        miss = (~hit).nonzero().squeeze(-1)
+        exact = self._frames_exact(c[miss], t[miss])
+        for name in GRID_FIELDS:
+            getattr(out, name)[miss] = getattr(exact, name)
+        return out
+
+    def use_control_grid(self, dt: float | None, steps_past_end: int = 0, max_bytes: int = 512 * 2**20) -> bool:
+        """Precompute every clip's frames at the grid times ``j dt`` (the control rate) so that
+        :meth:`frames` at those times is a table lookup instead of interpolation and forward
+        kinematics (:class:`ControlGrid`; the values are the computed ones at ``j dt``).
+
+        Non-looping clips: ``j dt`` up to the clip's end, plus the end time itself (where later
+        times clamp to). Looping clips: one period plus ``steps_past_end`` grid times (episodes that
+        start late in a cycle and run on). ``dt=None`` removes the grid. Returns False (and keeps no
+        grid) when the table would need more than ``max_bytes``: frames are then computed as before.
+        """
+        if dt is None:
+            self._grid = None
+            return False
+        if self._grid is not None and self._grid.dt == float(dt) and self._grid.steps_past_end >= steps_past_end:
+            return True
+        self._grid = None
+        grid = ControlGrid.build(self, float(dt), int(steps_past_end), max_bytes)
+        self._grid = grid
+        return grid is not None
+
+    def _frames_exact(self, c: Tensor, t: Tensor) -> MotionFrames:
+        dt = self.dtype
         dur, fps, loop = self._dur64[c], self._fps64[c], self._loops[c]
         k = torch.where(loop, torch.floor(t / dur), torch.zeros_like(t))
         tw = torch.where(loop, t - k * dur, t).clamp(min=0.0).minimum(dur)
@@ -432,4 +473,75 @@ class MotionLibrary:
         return body_pos, body_rot, _rotate_z(lin_vel, turn), _rotate_z(ang_vel, turn)
 
 
-__all__ = ["ClipInfo", "MotionLibrary"]
+#: MotionFrames fields a control grid stores (times: the wrapped clip time)
+GRID_FIELDS: tuple[str, ...] = (
+    "root_pos",
+    "root_rot",
+    "root_lin_vel",
+    "root_ang_vel",
+    "dof_pos",
+    "dof_vel",
+    "body_pos",
+    "body_rot",
+    "body_lin_vel",
+    "body_ang_vel",
+    "times",
+)
+
+
+@dataclass
+class ControlGrid:
+    """Every clip's reference frames at the grid times ``j dt``, packed into one (R, K) table.
+
+    Row ``offsets[c] + j`` holds clip ``c`` at ``min(j dt, duration)`` (non-looping) or ``j dt``
+    (looping, past the period with the cycle offsets applied), computed once by the library's own
+    interpolation; a lookup is one ``index_select`` and the returned fields are views of its result
+    (never of the table).
+    """
+
+    dt: float
+    inv_dt: float
+    steps_past_end: int
+    offsets: Tensor  # (C,) long, first row of each clip
+    lengths: Tensor  # (C,) long, grid times stored per clip
+    table: Tensor  # (R, K)
+    layout: tuple[tuple[str, int, tuple[int, ...]], ...]  # field, first column, trailing shape
+
+    @classmethod
+    def build(cls, lib: "MotionLibrary", dt: float, steps_past_end: int, max_bytes: int) -> "ControlGrid | None":
+        if not dt > 0:
+            raise ValueError(f"control grid dt must be > 0, got {dt}")
+        dur = lib._dur64.cpu()
+        last = torch.floor(dur / dt + 1e-9).long()  # last grid index inside [0, duration]
+        loops = lib._loops.cpu()
+        lengths = torch.where(loops, last + 1 + steps_past_end, last + 2)
+        B, D = lib.skeleton.num_bodies, lib.skeleton.num_dofs
+        widths = {"root_pos": (3,), "root_rot": (4,), "root_lin_vel": (3,), "root_ang_vel": (3,), "dof_pos": (D,), "dof_vel": (D,)}
+        widths.update({"body_pos": (B, 3), "body_rot": (B, 4), "body_lin_vel": (B, 3), "body_ang_vel": (B, 3), "times": ()})
+        layout, col = [], 0
+        for name in GRID_FIELDS:
+            layout.append((name, col, widths[name]))
+            col += int(math.prod(widths[name]))
+        R = int(lengths.sum())
+        if R * col * torch.empty(0, dtype=lib.dtype).element_size() > max_bytes:
+            return None
+        clip = _segment_ids(lengths)
+        offsets = torch.cumsum(lengths, 0) - lengths
+        j = torch.arange(R) - offsets[clip]
+        t = j.to(torch.float64) * dt
+        t = torch.where(loops[clip], t, torch.minimum(t, dur[clip]))
+        table = torch.empty(R, col, dtype=lib.dtype, device=lib.device)
+        for a in range(0, R, 4096):
+            b = min(R, a + 4096)
+            f = lib._frames_exact(clip[a:b].to(lib.device), t[a:b].to(lib.device))
+            table[a:b] = torch.cat([getattr(f, name).reshape(b - a, -1).to(lib.dtype) for name in GRID_FIELDS], dim=1)
+        return cls(dt, 1.0 / dt, steps_past_end, offsets.to(lib.device), lengths.to(lib.device), table, tuple(layout))
+
+    def lookup(self, rows: Tensor, clip_ids: Tensor) -> MotionFrames:
+        x = self.table.index_select(0, rows)
+        n = x.shape[0]
+        out = {name: x[:, c : c + int(math.prod(shape))].view(n, *shape) for name, c, shape in self.layout}
+        return MotionFrames(**out, clip_ids=clip_ids)
+
+
+__all__ = ["ClipInfo", "ControlGrid", "MotionLibrary"]

@@ -71,7 +71,7 @@ from mocap.hard_negatives import FailureTracker
 from mocap.hard_negatives import failure_weights as hard_negative_weights
 from mocap.interfaces import Box, Imitator, Simulator
 from mocap.motion.library import MotionLibrary
-from mocap.observations import imitation_goal, imitation_goal_dim, proprioception, proprioception_dim
+from mocap.observations import imitation_goal_dim, proprioception_and_goal, proprioception_dim
 from mocap.rl.env import StepResult
 from mocap.skeleton import Skeleton
 from mocap.state import HUMANOID_FIELDS, HumanoidState, MotionFrames, Observations, SimState
@@ -103,19 +103,16 @@ class PHCObservation:
         return proprioception_dim(num_bodies) + imitation_goal_dim(num_bodies, self.goal)
 
     def __call__(self, state: HumanoidState, ref_next: HumanoidState) -> Observations:
-        proprio = proprioception(state, self.sixd)
         extra: dict[str, Any] = {}
         if self.recovery is not None:
             from mocap_phc.recovery import recovery_reference
 
             ref_next, far = recovery_reference(state, ref_next, self.recovery)
             extra["recovering"] = far
-        goal = imitation_goal(state, ref_next, self.goal, self.sixd)
-        return Observations(
-            proprio=torch.nan_to_num(proprio.float(), nan=0.0, posinf=0.0, neginf=0.0),
-            goal=torch.nan_to_num(goal.float(), nan=0.0, posinf=0.0, neginf=0.0),
-            extra={"ref_dof_pos": ref_next.dof_pos, **extra},
-        )
+        proprio, goal = proprioception_and_goal(state, ref_next, self.goal, self.sixd)
+        # no per-step nan_to_num: simulators put an unstable env back to a finite state
+        # (SimState.unstable), so the inputs here are finite
+        return Observations(proprio=proprio.float(), goal=goal.float(), extra={"ref_dof_pos": ref_next.dof_pos, **extra})
 
     @staticmethod
     def flatten(obs: Observations) -> Tensor:
@@ -286,6 +283,8 @@ class ImitationEnv:
         self.progress = torch.zeros(N, dtype=torch.long, device=dev)
         self.ep_return = torch.zeros(N, dtype=torch.float64, device=dev)
         self.failures = FailureTracker(lib, p)
+        if p.control_grid:  # the reference at t0 + k dt becomes a table lookup (start times on the grid)
+            lib.use_control_grid(self.dt, p.episode_steps + 2)
         self._durations = lib.durations.to(dev, torch.float64)
         self._loops = lib.loops.to(dev)
         self._ref_next: MotionFrames | None = None
@@ -374,6 +373,10 @@ class ImitationEnv:
         dur = self._durations[clips]
         latest = torch.where(self._loops[clips], dur, (dur - self.dt).clamp_min(0.0))
         t0 = torch.minimum(t0, latest)
+        if self.params.control_grid:  # the grid time at or before t0 (looping clips: within the period)
+            j = torch.floor(t0 / self.dt + 1e-9)
+            j = torch.where(self._loops[clips] & (j * self.dt >= dur - 1e-9), (j - 1).clamp_min(0), j)
+            t0 = j * self.dt
         self.clip_ids[ids] = clips
         self.start_time[ids] = t0
         self.progress[ids] = 0

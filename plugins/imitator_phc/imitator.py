@@ -96,6 +96,13 @@ class PHCParams(BaseModel):
     )
     # ---------------------------------------------------------------------------- episodes
     episode_steps: int = Field(300, ge=1, description="time limit in control steps ([C] 300 = 10 s at 30 Hz); truncation, bootstrapped")
+    control_grid: bool = Field(
+        True,
+        description="episode start times on the control-rate grid (t0 = j dt, j uniform over the clip's grid times) and the "
+        "reference read from a table precomputed at those times (MotionLibrary.use_control_grid; the speed path). False: "
+        "continuous start times, the reference interpolated and run through forward kinematics every step (DeepMimic's "
+        "and PHC's continuous phase; identical frames at grid times)",
+    )
     fail_states: FailStateParams | None = Field(
         None,
         description="fallen and far episode starts with a grace window (PHC+ fail-state recovery, mocap_phc.recovery); None: RSI only",
