@@ -1,5 +1,15 @@
 """Checkpoint files: written atomically, carrying the spec and the package versions that made them.
 
+Loading never runs code from the file: :func:`load_checkpoint` reads with
+``torch.load(weights_only=True)``, PyTorch's restricted unpickler, which builds only tensors,
+containers (dict, list, tuple) and plain values and refuses every other Python object (a pickled
+function call, a class, a NumPy array). A file that holds such objects is refused with one line;
+if it is an older mocap checkpoint the user trusts, :func:`convert_checkpoint` (``mocap checkpoint
+convert PATH --trust``) rewrites it once into the safe form. (Why not safetensors: a trainer
+checkpoint also carries nested metadata, optimizer state and RNG states; the restricted unpickler
+reads all of it without executing code, so one file format serves both, and the committed
+checkpoints stay readable.)
+
 Errors a user can act on are raised as :class:`CheckpointError` (a missing, corrupt or truncated
 file, a format version this mocap does not read, a checkpoint trained for another humanoid or
 architecture than the spec asks for) and :class:`StorageError` (a write that failed: disk full,
@@ -161,8 +171,15 @@ def load_checkpoint(
     if not path.is_file():
         raise CheckpointError(f"{path}: no such checkpoint")
     try:
-        data = torch.load(path, map_location=map_location, weights_only=False)
+        data = torch.load(path, map_location=map_location, weights_only=True)
     except Exception as exc:  # noqa: BLE001 - torch raises EOFError, RuntimeError, UnpicklingError, ...
+        unsafe = _refused_global(exc)
+        if unsafe is not None:
+            raise CheckpointError(
+                f"{path}: refused: the file holds pickled Python objects ({unsafe}) that loading would have to run; mocap "
+                f"loads only tensors and plain data. If this is an older mocap checkpoint from a source you trust, convert it "
+                f"once: mocap checkpoint convert {path} --trust"
+            ) from None
         size = path.stat().st_size
         reason = str(exc).split(". ")[0].strip() or type(exc).__name__
         raise CheckpointError(
@@ -174,6 +191,71 @@ def load_checkpoint(
     if expect is not None:
         check_format(path, data, expect, what=what)
     return data
+
+
+def _refused_global(exc: BaseException) -> str | None:
+    """The global a restricted (``weights_only``) load refused, e.g. ``numpy._core.multiarray._reconstruct``
+    (None when ``exc`` is another failure: a corrupt or truncated file)."""
+    text = str(exc)
+    m = re.search(r"(?:Unsupported global: GLOBAL|Unsupported operand|Trying to load unsupported object)\s*([\w.]*)", text)
+    if m:
+        return m.group(1) or "an object"
+    if "weights_only" in text.lower() and "unsupported" in text.lower():
+        return "an object"
+    return None
+
+
+def _to_safe(obj: Any) -> Any:
+    """``obj`` with NumPy arrays/scalars as tensors/numbers and deques/sets as lists (what a
+    ``weights_only`` load accepts); NumPy's legacy RNG state tuple as :mod:`mocap.rng`'s dict."""
+    import collections
+
+    import numpy as np
+
+    if isinstance(obj, dict):
+        return {k: _to_safe(v) for k, v in obj.items()}
+    if isinstance(obj, tuple) and len(obj) == 5 and obj[0] == "MT19937" and isinstance(obj[1], np.ndarray):
+        return {"bit_generator": "MT19937", "keys": torch.from_numpy(obj[1].astype(np.int64)), "pos": int(obj[2]),
+                "has_gauss": int(obj[3]), "cached_gaussian": float(obj[4])}  # fmt: skip
+    if isinstance(obj, (list, tuple)):
+        items = [_to_safe(v) for v in obj]
+        return items if isinstance(obj, list) else tuple(items)
+    if isinstance(obj, (collections.deque, set, frozenset)):
+        return [_to_safe(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return torch.from_numpy(np.array(obj, copy=True))
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj
+
+
+def convert_checkpoint(src: Path, dst: Path | None = None) -> Path:
+    """Rewrite an older checkpoint that a safe load refuses into the safe form (``dst``, default in
+    place). **This unpickles ``src`` without restriction, i.e. runs whatever code it holds: call it
+    only on a file you trust.** Raises :class:`CheckpointError` when the result still is not safe
+    (an object this converter does not know) or the file is not a checkpoint."""
+    import io
+
+    src = Path(src)
+    dst = Path(dst) if dst is not None else src
+    if not src.is_file():
+        raise CheckpointError(f"{src}: no such checkpoint")
+    try:
+        data = torch.load(src, map_location="cpu", weights_only=False)
+    except Exception as exc:  # noqa: BLE001
+        raise CheckpointError(f"{src}: unreadable checkpoint ({type(exc).__name__}: {str(exc).split('. ')[0]})") from None
+    if not isinstance(data, dict):
+        raise CheckpointError(f"{src}: not a mocap checkpoint (it holds a {type(data).__name__}, not a dict)")
+    safe = _to_safe(data)
+    buffer = io.BytesIO()
+    torch.save(safe, buffer)
+    try:
+        torch.load(io.BytesIO(buffer.getvalue()), map_location="cpu", weights_only=True)
+    except Exception as exc:  # noqa: BLE001
+        what = _refused_global(exc) or type(exc).__name__
+        raise CheckpointError(f"{src}: cannot convert: it holds an object mocap does not know how to store safely ({what})") from None
+    atomic_write_bytes(dst, buffer.getvalue())
+    return dst
 
 
 _FORMAT_RE = re.compile(r"^(?P<family>.+)/(?P<version>\d+)$")
@@ -244,6 +326,7 @@ __all__ = [
     "atomic_write_json",
     "atomic_write_text",
     "check_format",
+    "convert_checkpoint",
     "embedded_humanoid",
     "hardware",
     "load_checkpoint",

@@ -275,6 +275,26 @@ def cmd_plugins(as_json: Annotated[bool, typer.Option("--json", help="machine-re
         raise typer.Exit(EXIT_USER_ERROR)
 
 
+def cmd_checkpoint_convert(
+    path: Annotated[Path, typer.Argument(help="an older mocap checkpoint (.pt) that a safe load refuses")],
+    out: Annotated[Optional[Path], typer.Option("--out", "-o", help="write here (default: replace the file)")] = None,
+    trust: Annotated[bool, typer.Option("--trust", help="confirm that you trust the file: converting runs its pickled code")] = False,
+) -> None:
+    """Rewrite an older checkpoint into the safe form that mocap loads without running code.
+
+    Converting unpickles the file without restriction, i.e. runs any code it holds: only for files
+    you trust (yours, or an official release). Needs --trust."""
+    from mocap.checkpoint import convert_checkpoint
+
+    if not trust:
+        raise UserError(
+            f"{path}: converting a checkpoint runs any code pickled in it; only convert files you trust, and say so with --trust"
+        )
+    err_console.print(f"[yellow]warning:[/] unpickling {path} without restriction (trusted by --trust)", highlight=False)
+    dst = convert_checkpoint(path, out)
+    console.print(f"wrote {dst} (loads without running code)", highlight=False)
+
+
 def build_app(pset: PluginSet | None = None) -> typer.Typer:
     """The root app with the core commands and every plugin's commands."""
     app = typer.Typer(
@@ -288,6 +308,9 @@ def build_app(pset: PluginSet | None = None) -> typer.Typer:
     app.command("validate")(cmd_validate)
     app.command("schema")(cmd_schema)
     app.command("plugins")(cmd_plugins)
+    checkpoint_app = typer.Typer(name="checkpoint", help="Checkpoint files: convert older ones to the safe format.", no_args_is_help=True)
+    checkpoint_app.command("convert")(cmd_checkpoint_convert)
+    app.add_typer(checkpoint_app)
 
     @app.callback(invoke_without_command=True)
     def _root(

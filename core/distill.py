@@ -78,6 +78,7 @@ from torch import Tensor
 from mocap import distributed as dist
 from mocap.checkpoint import load_checkpoint, save_checkpoint
 from mocap.faults import FaultGuard
+from mocap.rng import rng_state, set_rng_state
 from mocap.hooks import hookimpl
 from mocap.interfaces import Imitator, Simulator, StageResult, Trainer
 from mocap.hard_negatives import FailureTracker, failure_weights
@@ -203,21 +204,6 @@ def load_latent_state(path: Path, map_location: str | torch.device = "cpu") -> d
 
 
 # --------------------------------------------------------------------------------- episodes
-def _rng_state() -> dict[str, Any]:
-    state = {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()}
-    if torch.cuda.is_available():  # pragma: no cover - no GPU in CI
-        state["cuda"] = torch.cuda.get_rng_state_all()
-    return state
-
-
-def _set_rng_state(state: dict[str, Any]) -> None:
-    torch.set_rng_state(state["torch"])
-    np.random.set_state(state["numpy"])
-    random.setstate(state["python"])
-    if "cuda" in state and torch.cuda.is_available():  # pragma: no cover
-        torch.cuda.set_rng_state_all(state["cuda"])
-
-
 _HUMANOID_FIELDS = HUMANOID_FIELDS
 
 
@@ -449,7 +435,7 @@ class DistillTrainer(Trainer):
             last_eval = dict(ck.get("last_eval", {}))
             guard.load_state_dict(ck.get("faults", {}))
             if mine is not None:
-                _set_rng_state(mine["rng"])
+                set_rng_state(mine["rng"])
             ctx.log.truncate_after(iteration)
             ctx.console.print(f"distill: resuming at iteration {iteration} ({env_steps:,} env steps)")
             if int(ck.get("world_size", 1)) != world:
@@ -472,7 +458,7 @@ class DistillTrainer(Trainer):
                     {
                         "episodes": episodes.state_dict(),
                         "generator": gen.get_state(),
-                        "rng": _rng_state(),
+                        "rng": rng_state(),
                         "episode_window": {k: list(v) for k, v in window.items()},
                     }
                 )
@@ -490,7 +476,7 @@ class DistillTrainer(Trainer):
                     "optimizer": optimizer.state_dict(),
                     "episodes": episodes.state_dict(),
                     "generator": gen.get_state(),
-                    "rng": _rng_state(),
+                    "rng": rng_state(),
                     "episode_window": {k: list(v) for k, v in window.items()},
                     "last_eval": last_eval,
                     "faults": guard.state_dict(),

@@ -25,6 +25,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from rich.progress import Progress
 
 from mocap.baselines import PDReplay
+from mocap.paths import safe_filename
 from mocap.checkpoint import atomic_write_json, atomic_write_text
 from mocap.hooks import hookimpl
 from mocap.interfaces import Imitator, Metric, Simulator, StageResult, Trainer
@@ -269,7 +270,7 @@ class ImitationEval(Trainer):
         ctx.log.log(0, **numeric)
         if p.video:
             clip = p.video_clip or lib.clip_names[0]
-            name = f"imitation_{clip}.{p.video_format}"
+            name = f"imitation_{safe_filename(clip)}.{p.video_format}"  # clip names come from motion files
             path = record_video(imitator, lib, make_sim, clip, p.video_seconds, ctx.publish(name))
             ctx.console.print(f"video: {Path(ctx.run_dir) / name}" if path else "[yellow]video skipped[/]: the simulator cannot render")
         return StageResult(checkpoint=None, metrics=numeric)
@@ -731,7 +732,7 @@ def register_commands(app):  # type: ignore[no-untyped-def]
             video.mkdir(parents=True, exist_ok=True)
             for name in lib.clip_names:
                 seconds = loop if (loop and bool(lib.loops[lib.clip_index(name)])) else float(lib.durations[lib.clip_index(name)])
-                path = record_video(imitator, lib, make_sim, name, seconds, video / f"{name}.mp4")
+                path = record_video(imitator, lib, make_sim, name, seconds, video / f"{safe_filename(name)}.mp4")
                 if path is None:
                     console.print("[yellow]videos skipped[/]: the simulator cannot render")
                     break

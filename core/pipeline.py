@@ -192,7 +192,9 @@ class StageContext:
     def publish(self, name: str) -> Path:
         """Path under which to write an output file ``name`` for the run directory (a table, a
         video). The pipeline copies it there; a later run that reuses this stage gets it too."""
-        path = self.workdir / PUBLISHED_DIR / name
+        from mocap.paths import confined
+
+        path = confined(self.workdir / PUBLISHED_DIR, name)  # a name built from data never leaves the folder
         path.parent.mkdir(parents=True, exist_ok=True)
         return path
 
@@ -248,14 +250,56 @@ def run_pipeline(
 ) -> list[StageRecord]:
     """Run every stage the spec names, reusing finished artifacts; return what each stage did."""
     console = console or Console()
-    spec = resolved.spec
     out_dir = Path(out_dir)
     store = Path(store) if store is not None else artifact_store(out_dir)
     main = dist.is_main()  # rank 0 under torchrun, else the one process
     if not main:  # the other ranks of a data-parallel run are quiet and write nothing
         console = _quiet_console()
-    else:
+    run_lock: contextlib.AbstractContextManager[None] = contextlib.nullcontext()
+    if main:
         out_dir.mkdir(parents=True, exist_ok=True)
+        run_lock = run_dir_lock(out_dir)
+    with run_lock:
+        return _run_pipeline_locked(resolved, plugins, out_dir, store, console, main)
+
+
+RUN_LOCK = ".mocap-run.lock"
+
+
+@contextlib.contextmanager
+def run_dir_lock(out_dir: Path) -> Iterator[None]:
+    """Exclusive use of a run directory for the whole run: a second ``mocap run`` into the same
+    directory is refused at once (StageFailed naming the holder's pid) instead of interleaving its
+    metrics and overwriting the spec. An OS lock (``flock``): a killed run releases it."""
+    import fcntl
+    import os
+
+    path = Path(out_dir) / RUN_LOCK
+    with path.open("a+") as fh:
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            fh.seek(0)
+            holder = fh.read().strip() or "unknown"
+            raise StageFailed(
+                f"{out_dir}: another mocap run (pid {holder}) is writing to this run directory; wait for it to finish, "
+                "or choose another --out"
+            ) from None
+        try:
+            fh.seek(0)
+            fh.truncate()
+            fh.write(str(os.getpid()))
+            fh.flush()
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
+def _run_pipeline_locked(
+    resolved: ResolvedSpec, plugins: PluginSet, out_dir: Path, store: Path, console: Console, main: bool
+) -> list[StageRecord]:
+    spec = resolved.spec
+    if main:
         atomic_write_text(out_dir / "spec.yaml", resolved.to_yaml())
     if spec.torch_threads is not None:
         torch.set_num_threads(spec.torch_threads)
@@ -387,7 +431,10 @@ def _run_stage_locked(
         _stop=lambda: stop.requested,
     )
     trainer = ctx.build(f"{stage}.trainer")
-    verb = "resuming" if any(workdir.glob("*.pt")) else "running"
+    resuming = any(workdir.glob("*.pt"))
+    if main and not resuming:  # rows of an earlier attempt killed before its first checkpoint (e.g. an eval stage)
+        log.truncate_after(-1)
+    verb = "resuming" if resuming else "running"
     console.print(f"[bold]{stage}[/]: {verb} trainer {trainer_ref.name!r} in {workdir}")
     parallel = dist.world_size() > 1
     data_parallel = parallel and bool(getattr(trainer, "data_parallel", False))

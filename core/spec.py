@@ -64,7 +64,11 @@ class Spec(_Strict):
     """A complete run: the components for each role and the stages to run."""
 
     spec_version: Literal[1] = Field(description="spec format version (this build reads version 1)")
-    name: str = Field(description="run name (used for the run directory)")
+    name: str = Field(
+        description="run name, used as the run directory's name (runs/<name>): letters, digits, '.', '_' and '-', "
+        "starting with a letter or digit, at most 100 characters",
+        pattern=r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$",
+    )
     description: str = ""
     seed: int = Field(default=0, description="global seed; each stage derives its own from it")
     device: Literal["auto", "cpu", "cuda"] = Field(default="auto", description="torch device for networks")

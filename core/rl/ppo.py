@@ -43,6 +43,7 @@ from mocap.faults import FaultGuard
 from mocap.interfaces import Box, MultiDiscrete, StageResult, Trainer
 from mocap.progress import IterationProgress
 from mocap.rl.networks import ActorCritic, save_policy
+from mocap.rng import rng_state, set_rng_state
 
 CHECKPOINT_FORMAT = "mocap.rl.ppo/1"
 CHECKPOINT_NAME = "ppo.pt"
@@ -216,21 +217,6 @@ class PPOParams(BaseModel):
 
 
 # -------------------------------------------------------------------------------------- trainer
-def _rng_state() -> dict[str, Any]:
-    state = {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()}
-    if torch.cuda.is_available():  # pragma: no cover - no GPU in CI
-        state["cuda"] = torch.cuda.get_rng_state_all()
-    return state
-
-
-def _set_rng_state(state: dict[str, Any]) -> None:
-    torch.set_rng_state(state["torch"])
-    np.random.set_state(state["numpy"])
-    random.setstate(state["python"])
-    if "cuda" in state and torch.cuda.is_available():  # pragma: no cover
-        torch.cuda.set_rng_state_all(state["cuda"])
-
-
 class PPOTrainer(Trainer):
     """Trains an :class:`ActorCritic` on ``ctx.make_rl_env(num_envs)`` with PPO; resumes from ``ppo.pt``."""
 
@@ -300,7 +286,7 @@ class PPOTrainer(Trainer):
                 window = {k: deque(v, maxlen=EPISODE_WINDOW) for k, v in mine["episode_window"].items()}
             guard.load_state_dict(ck.get("faults", {}))
             if mine is not None:
-                _set_rng_state(mine["rng"])
+                set_rng_state(mine["rng"])
             ctx.log.truncate_after(iteration)
             ctx.console.print(f"ppo: resuming at iteration {iteration} ({env_steps:,} env steps)")
             if int(ck.get("world_size", 1)) != world:
@@ -331,7 +317,7 @@ class PPOTrainer(Trainer):
                     {
                         "env": env.state_dict(),
                         "obs": obs.detach().cpu(),
-                        "rng": _rng_state(),
+                        "rng": rng_state(),
                         "episode_window": {k: list(v) for k, v in window.items()},
                     }
                 )
@@ -349,7 +335,7 @@ class PPOTrainer(Trainer):
                     "optimizer": optimizer.state_dict(),
                     "env": env.state_dict(),
                     "obs": obs.detach().cpu(),
-                    "rng": _rng_state(),
+                    "rng": rng_state(),
                     "episode_window": {k: list(v) for k, v in window.items()},
                     "faults": guard.state_dict(),
                     "params": p.model_dump(mode="json"),

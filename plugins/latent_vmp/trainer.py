@@ -31,6 +31,7 @@ from mocap.interfaces import StageResult, Trainer
 from mocap_vmp.features import GROUPS, clip_starts, feature_stats
 from mocap_vmp.latent import VmpLatent
 from mocap_vmp.vae import cyclical_beta, kl_divergence, per_frame_errors, reconstruction_loss
+from mocap.rng import rng_state, set_rng_state
 
 CHECKPOINT_FORMAT = "mocap_vmp.supervised/1"
 CHECKPOINT_NAME = "vmp.pt"
@@ -57,16 +58,6 @@ class SupervisedParams(BaseModel):
     checkpoint_every: int = Field(500, ge=1, description="steps between checkpoints (also at the end and on Ctrl-C)")
     print_every: int = Field(100, ge=1, description="steps between progress lines")
     latent_batch: int = Field(1024, ge=1, description="windows per batch when precomputing the per-frame latents")
-
-
-def _rng_state() -> dict[str, Any]:
-    return {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()}
-
-
-def _set_rng_state(state: dict[str, Any]) -> None:
-    torch.set_rng_state(state["torch"])
-    np.random.set_state(state["numpy"])
-    random.setstate(state["python"])
 
 
 class SupervisedTrainer(Trainer):
@@ -106,7 +97,7 @@ class SupervisedTrainer(Trainer):
             optimizer.load_state_dict(ck["optimizer"])
             scheduler.load_state_dict(ck["scheduler"])
             sampler.set_state(ck["sampler"])
-            _set_rng_state(ck["rng"])
+            set_rng_state(ck["rng"])
             step = int(ck["step"])
             ctx.log.truncate_after(step)
             ctx.console.print(f"vmp: resuming at step {step}")
@@ -128,7 +119,7 @@ class SupervisedTrainer(Trainer):
                     "optimizer": optimizer.state_dict(),
                     "scheduler": scheduler.state_dict(),
                     "sampler": sampler.get_state(),
-                    "rng": _rng_state(),
+                    "rng": rng_state(),
                     "params": p.model_dump(mode="json"),
                     "frame_latents": None if frame_latents is None else frame_latents.cpu(),
                     "clip_names": list(lib.clip_names),

@@ -1,0 +1,177 @@
+"""Time to skill: what an imitator spec learns from scratch in a fixed wall-clock budget.
+
+Trains ``--spec`` (default ``specs/imitator/amp_bundled.yaml``) from nothing with ``mocap run`` in
+a child process for ``--minutes`` of wall-clock (default 60). Every ``--eval-every`` minutes
+(default 10) the trainer's newest checkpoint (written every ``--checkpoint-every`` iterations) is
+copied aside; at the end the child is stopped with Ctrl-C (a clean stop), and every snapshot is
+evaluated with ``mocap eval``'s protocol (each clip once from its first frame, deterministic
+actions; success = mean body error <= 0.5 m at every frame). The evaluations run after training,
+so they do not take time from it: the wall-clock axis is training time only.
+
+Output (``--out``, JSON + a PNG next to it): per snapshot the minutes, env steps, clips tracked,
+MPJPE-g on the tracked clips and on all clips, and the per-clip successes; the load average before
+and after (run it on an otherwise idle machine: the curve is wall-clock bound).
+
+    python bench/time_to_skill.py --minutes 60 --out bench/results/time_to_skill_after.json
+
+It measures whatever code ``mocap`` imports: to measure another checkout, run this script with that
+checkout's packages first on ``PYTHONPATH`` (the child inherits it), ``--label`` naming it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+
+def _newest_checkpoint(store: Path) -> Path | None:
+    found = sorted(store.glob("imitator-*/ppo.pt"), key=lambda p: p.stat().st_mtime)
+    return found[-1] if found else None
+
+
+def _env_steps(path: Path) -> int:
+    import torch
+
+    ck = torch.load(path, map_location="cpu", weights_only=False)  # our own trainer's file, written by the child
+    return int(ck.get("env_steps", 0))
+
+
+def train(spec: Path, minutes: float, eval_every: float, checkpoint_every: int, work: Path, overrides: list[str]) -> list[dict]:
+    """Run the spec for ``minutes``; return the snapshots taken (path, minute, env steps)."""
+    out, store = work / "runs" / "tts", work / "runs" / "artifacts"
+    cmd = [sys.executable, "-m", "mocap", "run", str(spec), "--out", str(out), "--store", str(store), "--set", "eval=null"]
+    cmd += ["--set", f"imitator.trainer.params.checkpoint_every={checkpoint_every}"]
+    for o in overrides:
+        cmd += ["--set", o]
+    log = open(work / "train.log", "w")
+    t0 = time.perf_counter()
+    child = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)
+    snaps: list[dict] = []
+    marks = [eval_every * (k + 1) for k in range(int(minutes / eval_every + 1e-9))]
+    try:
+        for mark in marks:
+            while time.perf_counter() - t0 < mark * 60 and child.poll() is None:
+                time.sleep(1.0)
+            newest = _newest_checkpoint(store)
+            if newest is None:
+                print(f"[{mark:5.1f} min] no checkpoint yet", flush=True)
+                continue
+            dst = work / f"snapshot_{mark:07.2f}" / "ppo.pt"  # mocap eval knows a trainer checkpoint by its name
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(newest, dst)
+            steps = _env_steps(dst)
+            snaps.append({"minutes": mark, "env_steps": steps, "path": str(dst)})
+            print(f"[{mark:5.1f} min] snapshot at {steps / 1e6:.2f}M env steps", flush=True)
+            if child.poll() is not None:
+                break
+    finally:
+        if child.poll() is None:
+            child.send_signal(signal.SIGINT)
+            try:
+                child.wait(timeout=120)
+            except subprocess.TimeoutExpired:
+                child.kill()
+        log.close()
+    return snaps
+
+
+def evaluate(snap: dict, work: Path) -> dict:
+    out = Path(snap["path"]).parent / "eval.json"
+    subprocess.run([sys.executable, "-m", "mocap", "eval", snap["path"], "--json", str(out)], check=True, capture_output=True)
+    d = json.loads(out.read_text())
+    agg = d["aggregate"]
+    return {
+        **{k: v for k, v in snap.items() if k != "path"},
+        "clips_tracked": int(agg["succeeded"]),
+        "clips_total": int(agg["total"]),
+        "mpjpe_g_succ_mm": agg.get("mpjpe_g_succ"),
+        "mpjpe_g_all_mm": agg.get("mpjpe_g"),
+        "tracked": sorted(name for name, c in d["clips"].items() if c["success"]),
+    }
+
+
+def plot(result: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    pts = result["points"]
+    fig, axes = plt.subplots(1, 3, figsize=(13, 3.6))
+    x_min = [p["minutes"] for p in pts]
+    x_steps = [p["env_steps"] / 1e6 for p in pts]
+    clips = [p["clips_tracked"] for p in pts]
+    mm = [p["mpjpe_g_succ_mm"] if p["mpjpe_g_succ_mm"] is not None else float("nan") for p in pts]
+    axes[0].plot(x_min, clips, "o-")
+    axes[0].set(xlabel="wall-clock, min", ylabel="clips tracked (of 15)", title="clips vs wall-clock")
+    axes[1].plot(x_steps, clips, "o-")
+    axes[1].set(xlabel="env steps, M", ylabel="clips tracked", title="clips vs env steps")
+    axes[2].plot(x_min, mm, "o-")
+    axes[2].set(xlabel="wall-clock, min", ylabel="MPJPE-g on tracked clips, mm", title="error vs wall-clock")
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    fig.suptitle(f"time to skill: {result['label']} ({result['spec']})")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--spec", type=Path, default=Path("specs/imitator/amp_bundled.yaml"))
+    ap.add_argument("--minutes", type=float, default=60.0)
+    ap.add_argument("--eval-every", type=float, default=10.0, help="minutes between snapshots")
+    ap.add_argument("--checkpoint-every", type=int, default=2, help="trainer iterations between checkpoints")
+    ap.add_argument("--set", dest="overrides", action="append", default=[], help="extra spec override (repeatable)")
+    ap.add_argument("--label", default="this checkout")
+    ap.add_argument("--workdir", type=Path, default=None, help="keep the run and snapshots here (default: a temporary folder)")
+    ap.add_argument("--out", type=Path, default=Path("bench/results/time_to_skill.json"))
+    args = ap.parse_args(argv)
+    if args.eval_every <= 0 or args.minutes < args.eval_every:
+        ap.error("--eval-every must be > 0 and at most --minutes")
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    from mocap.checkpoint import hardware, package_versions
+
+    work = args.workdir or Path(tempfile.mkdtemp(prefix="time_to_skill_"))
+    work.mkdir(parents=True, exist_ok=True)
+    load_before = os.getloadavg()
+    started = time.strftime("%Y-%m-%dT%H:%M:%S")
+    snaps = train(args.spec.resolve(), args.minutes, args.eval_every, args.checkpoint_every, work, args.overrides)
+    load_after = os.getloadavg()
+    points = []
+    for snap in snaps:
+        points.append(evaluate(snap, work))
+        p = points[-1]
+        print(f"[{p['minutes']:5.1f} min, {p['env_steps'] / 1e6:.2f}M] {p['clips_tracked']}/{p['clips_total']} clips", flush=True)
+    result = {
+        "label": args.label,
+        "spec": str(args.spec),
+        "overrides": args.overrides,
+        "minutes": args.minutes,
+        "started": started,
+        "load_avg_before": load_before,
+        "load_avg_at_end_of_training": load_after,
+        "protocol": "mocap eval (mocap-imitation-v1), each snapshot evaluated after training",
+        "points": points,
+        "versions": package_versions(),
+        "hardware": hardware(),
+    }
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(result, indent=2) + "\n")
+    plot(result, args.out.with_suffix(".png"))
+    print(f"wrote {args.out} and {args.out.with_suffix('.png')}")
+    if args.workdir is None:
+        shutil.rmtree(work, ignore_errors=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

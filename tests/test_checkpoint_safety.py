@@ -1,0 +1,131 @@
+"""Loading a checkpoint never runs code from it (issue 25): every path that reads a checkpoint goes
+through :func:`mocap.checkpoint.load_checkpoint`'s restricted load, a crafted pickle payload is
+refused with one ``error:`` line, and older checkpoints convert once with an explicit command."""
+
+from __future__ import annotations
+
+import random
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from mocap.checkpoint import CheckpointError, convert_checkpoint, load_checkpoint
+from mocap.cli import main
+from mocap.rng import rng_state, set_rng_state
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+class _Payload:
+    """Unpickling this object runs ``exec``: it writes ``marker``."""
+
+    def __init__(self, marker: Path):
+        self.marker = marker
+
+    def __reduce__(self):  # noqa: D105
+        return (exec, (f"open({str(self.marker)!r}, 'w').write('pwned')",))
+
+
+def _evil(tmp_path: Path, name: str = "policy.pt") -> tuple[Path, Path]:
+    marker = tmp_path / "PWNED"
+    path = tmp_path / "evil" / name
+    path.parent.mkdir(parents=True, exist_ok=True)
+    torch.save({"format": "mocap.rl.policy/1", "model": {}, "payload": _Payload(marker)}, path)
+    return path, marker
+
+
+def test_the_payload_would_run_on_an_unrestricted_load(tmp_path):
+    """The test's own premise: without the restriction the payload does run."""
+    path, marker = _evil(tmp_path)
+    torch.load(path, weights_only=False)
+    assert marker.read_text() == "pwned"
+
+
+def test_load_checkpoint_refuses_a_pickle_payload(tmp_path):
+    path, marker = _evil(tmp_path)
+    with pytest.raises(CheckpointError, match="refused.*pickled Python objects.*mocap checkpoint convert"):
+        load_checkpoint(path)
+    assert not marker.exists()
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["eval", "{ckpt}"],
+        ["generate", "{ckpt}"],
+        ["export", "{ckpt}", "{tmp}/exported"],
+        ["render", "{ckpt}", "--out", "{tmp}/x.mp4"],
+        ["recover", "{ckpt}"],
+        ["eval-noisy", "{ckpt}"],
+    ],
+    ids=lambda a: a[0],
+)
+def test_commands_given_a_crafted_checkpoint_never_run_it(tmp_path, capsys, argv, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    path, marker = _evil(tmp_path, "latent.pt" if argv[0] == "generate" else "policy.pt")
+    rc = main([a.format(ckpt=path, tmp=tmp_path) for a in argv])
+    err = capsys.readouterr().err
+    assert rc == 2, err
+    assert not marker.exists()
+    assert "Traceback" not in err and "error:" in err
+
+
+def test_a_spec_naming_a_crafted_checkpoint_never_runs_it(tmp_path, capsys):
+    path, marker = _evil(tmp_path)
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(
+        f"extends: {REPO / 'specs/imitator/amp_bundled.yaml'}\nname: evil\nimitator:\n  checkpoint: {path}\n  trainer: null\n"
+    )
+    rc = main(["eval", str(spec)])
+    assert rc == 2 and not marker.exists()
+    assert "refused" in capsys.readouterr().err
+
+
+def test_rng_state_round_trips_and_loads_safely(tmp_path):
+    torch.manual_seed(1), np.random.seed(2), random.seed(3)
+    state = rng_state()
+    first = (torch.rand(3), np.random.rand(3), random.random(), np.random.randn())
+    torch.save({"rng": state}, tmp_path / "r.pt")
+    loaded = torch.load(tmp_path / "r.pt", weights_only=True)["rng"]
+    set_rng_state(loaded)
+    again = (torch.rand(3), np.random.rand(3), random.random(), np.random.randn())
+    assert torch.equal(first[0], again[0]) and np.array_equal(first[1], again[1])
+    assert first[2] == again[2] and first[3] == again[3]
+
+
+def test_an_older_checkpoint_converts_once_with_trust(tmp_path, capsys):
+    """A trainer checkpoint of the previous format (NumPy RNG state inside) is refused with the
+    convert hint; `mocap checkpoint convert` needs --trust, then the file loads safely and its
+    RNG state restores NumPy's generator exactly."""
+    np.random.seed(5)
+    old = {"format": "mocap.rl.ppo/1", "rng": {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()},
+           "window": np.arange(3.0), "count": np.int64(7)}  # fmt: skip
+    expect = np.random.rand(4)
+    path = tmp_path / "ppo.pt"
+    torch.save(old, path)
+    with pytest.raises(CheckpointError, match="mocap checkpoint convert"):
+        load_checkpoint(path)
+    assert main(["checkpoint", "convert", str(path)]) == 2
+    assert "--trust" in capsys.readouterr().err
+    assert main(["checkpoint", "convert", str(path), "--trust"]) == 0
+    data = load_checkpoint(path)
+    assert torch.equal(data["window"], torch.arange(3.0, dtype=torch.float64)) and data["count"] == 7
+    set_rng_state(data["rng"])
+    assert np.array_equal(np.random.rand(4), expect)
+
+
+def test_convert_refuses_what_it_cannot_make_safe(tmp_path):
+    path = tmp_path / "odd.pt"
+    torch.save({"format": "x/1", "obj": Path("somewhere")}, path)
+    with pytest.raises(CheckpointError, match="cannot convert"):
+        convert_checkpoint(path, tmp_path / "out.pt")
+    assert not (tmp_path / "out.pt").exists()
+
+
+def test_every_committed_checkpoint_loads_safely():
+    files = sorted(REPO.glob("checkpoints/*/*.pt"))
+    assert files
+    for f in files:
+        assert isinstance(load_checkpoint(f), dict)
