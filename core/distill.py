@@ -87,6 +87,7 @@ from mocap.progress import IterationProgress
 from mocap.latent_imitator import LatentImitator, PDTargetTeacher, observations_to
 from mocap.motion.library import MotionLibrary
 from mocap.state import HUMANOID_FIELDS, HumanoidState, MotionFrames, Observations, SimState
+from mocap.bounds import EnvCount, LearningRate, ThreadCount
 
 CHECKPOINT_FORMAT = "mocap.distill/1"
 CHECKPOINT_NAME = "distill.pt"
@@ -101,14 +102,14 @@ class DistillParams(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    num_envs: int = Field(64, ge=1, description="parallel envs ([CODE]/[P] Table 4 'batch size' 3072; [CPU] 64)")
+    num_envs: EnvCount = Field(64, description="parallel envs ([CODE]/[P] Table 4 'batch size' 3072; [CPU] 64)")
     horizon: int = Field(32, ge=1, description="steps per env per iteration; chunk = num_envs × horizon ([CODE] 32)")
     total_env_steps: int = Field(2_000_000, ge=1, description="budget in env steps, rounded up to whole iterations ([P] ~1e9)")
     epochs: int = Field(2, ge=1, description="passes over each chunk")
     minibatch_envs: int = Field(
         16, ge=1, description="env columns per minibatch; each keeps its horizon steps in time order (minibatch = this × horizon samples)"
     )
-    lr: float = Field(5e-4, gt=0, description="Adam learning rate ([P] 5e-4)")
+    lr: LearningRate = Field(5e-4, description="Adam learning rate ([P] 5e-4)")
     label: Literal["policy_output", "pd_targets"] = Field(
         "policy_output",
         description="what the student learns: the teacher's raw policy output ([P]/[CODE]: PHC's normalized absolute "
@@ -142,7 +143,7 @@ class DistillParams(BaseModel):
     eval_horizon: float | None = Field(
         None, gt=0, description="seconds per evaluation episode of looping clips; None: episode_steps × dt"
     )
-    torch_threads: int | None = Field(1, ge=1, description="torch intra-op threads for this stage (None: keep the process setting)")
+    torch_threads: ThreadCount | None = Field(1, description="torch intra-op threads for this stage (None: keep the process setting)")
     max_consecutive_faults: int = Field(
         10, ge=0, description="stop after this many consecutive batches with non-finite values (each is skipped); 0: only skip"
     )

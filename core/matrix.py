@@ -80,6 +80,10 @@ def _set(doc: dict[str, Any], path: str, value: Any) -> dict[str, Any]:
     return doc
 
 
+#: most cells one comparison spec may expand to (each cell is a training run)
+MAX_CELLS = 1000
+
+
 def expand(doc: dict[str, Any], base_dir: Path, source: str = "<spec>") -> list[Cell]:
     """The cells of a spec document (one cell named ``""`` when it has no ``matrix``)."""
     doc = copy.deepcopy(doc)
@@ -95,6 +99,10 @@ def expand(doc: dict[str, Any], base_dir: Path, source: str = "<spec>") -> list[
         if not isinstance(values, list) or not values:
             raise SpecError(source, [SpecIssue(f"matrix.{path}", "must be a non-empty list of values")])
         axes.append((path, values))
+    count = math.prod(len(values) for _, values in axes)
+    if count > MAX_CELLS:
+        sizes = " x ".join(str(len(v)) for _, v in axes)
+        raise SpecError(source, [SpecIssue("matrix", f"{sizes} = {count:,} cells; a comparison runs at most {MAX_CELLS:,} (split it into several specs)")])
     cells = []
     for combo in itertools.product(*(values for _, values in axes)):
         cell_doc = copy.deepcopy(doc)

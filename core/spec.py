@@ -28,6 +28,7 @@ from typing import Any, Iterator, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from mocap.bounds import ThreadCount
 from mocap.plugins import PluginError, PluginSet, UnknownComponent
 
 SPEC_VERSION = 1
@@ -72,8 +73,8 @@ class Spec(_Strict):
     description: str = ""
     seed: int = Field(default=0, description="global seed; each stage derives its own from it")
     device: Literal["auto", "cpu", "cuda"] = Field(default="auto", description="torch device for networks")
-    torch_threads: int | None = Field(
-        default=None, ge=1, description="torch intra-op threads (None: leave the cores to the simulator threads)"
+    torch_threads: ThreadCount | None = Field(
+        default=None, description="torch intra-op threads (None: leave the cores to the simulator threads)"
     )
     humanoid: ComponentRef = Field(default_factory=lambda: ComponentRef(name="amp"))
     motions: ComponentRef = Field(default_factory=lambda: ComponentRef(name="deepmimic"))
@@ -144,9 +145,50 @@ def _issues_from_validation(exc: ValidationError, prefix: tuple[Any, ...] = ()) 
 
 
 # -------------------------------------------------------------------------------- YAML + merge
+#: limits of a spec document (a spec is a few kB and a few levels deep)
+MAX_SPEC_BYTES = 1_000_000
+MAX_SPEC_DEPTH = 50
+
+
+class _SpecLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` that refuses duplicate mapping keys (YAML would silently keep the last)
+    and nesting deeper than :data:`MAX_SPEC_DEPTH` (PyYAML recurses once per level)."""
+
+    _depth = 0
+
+    def compose_node(self, parent: Any, index: Any) -> Any:
+        self._depth += 1
+        try:
+            if self._depth > MAX_SPEC_DEPTH:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"nested more than {MAX_SPEC_DEPTH} levels deep", self.peek_event().start_mark
+                )
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+    def construct_mapping(self, node: Any, deep: bool = False) -> Any:
+        if isinstance(node, yaml.MappingNode):
+            seen: set[Any] = set()
+            for key_node, _ in node.value:
+                key = self.construct_object(key_node, deep=True)  # type: ignore[no-untyped-call]
+                try:
+                    dup = key in seen
+                    seen.add(key)
+                except TypeError:  # an unhashable key: SafeLoader reports it
+                    continue
+                if dup:
+                    raise yaml.constructor.ConstructorError(
+                        "while reading a mapping", node.start_mark, f"duplicate key {key!r}", key_node.start_mark
+                    )
+        return super().construct_mapping(node, deep=deep)
+
+
 def _yaml_load(text: str, source: str) -> Any:
+    if len(text) > MAX_SPEC_BYTES:
+        raise SpecError(source, [SpecIssue("", f"the document is {len(text):,} characters; a spec is at most {MAX_SPEC_BYTES:,}")])
     try:
-        return yaml.safe_load(text)
+        return yaml.load(text, Loader=_SpecLoader)  # noqa: S506 - a SafeLoader subclass
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         problem = exc.problem or exc.context or "invalid YAML"

@@ -55,3 +55,45 @@ def test_every_shipped_spec_name_is_a_slug():
         for line in path.read_text().splitlines():
             if line.startswith("name:"):
                 assert re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}", line.split(":", 1)[1].strip()), path
+
+
+@pytest.mark.parametrize(
+    "override, field",
+    [
+        ("imitator.trainer.params.actor_hidden=[-1]", "actor_hidden"),
+        ("imitator.trainer.params.lr=1e300", "lr"),
+        ("imitator.trainer.params.lr=nan", "lr"),
+        ("imitator.trainer.params.log_std_init=1e308", "log_std_init"),
+        ("imitator.trainer.params.torch_threads=100000", "torch_threads"),
+        ("torch_threads=100000", "torch_threads"),
+        ("imitator.trainer.params.num_envs=100000", "num_envs"),
+        ("simulator.params.threads=100000", "threads"),
+        ("simulator.params.markers=100000", "markers"),
+    ],
+)
+def test_values_that_would_crash_at_run_start_fail_validation(override, field):
+    """Specs that validated and then crashed (or segfaulted) at run start: now a validation error."""
+    from mocap.plugins import get_plugins
+    from mocap.spec import load_spec
+
+    with pytest.raises(SpecError, match=field):
+        load_spec(REPO / "specs/imitator/amp_bundled.yaml", get_plugins(), [override])
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("spec_version: 1\nname: a\nname: b\n", "duplicate key 'name'"),
+        ("spec_version: 1\nname: a\nx: " + "[" * 1000 + "]" * 1000 + "\n", "nested more than"),
+        ("spec_version: 1\nname: a\nmatrix:\n" + "".join(f"  seed{k}: [0,1,2,3,4,5,6,7,8,9]\n" for k in range(6)), "1,000,000 cells"),
+    ],
+    ids=["duplicate-key", "deep", "huge-matrix"],
+)
+def test_spec_documents_that_hung_or_crashed_are_one_error(tmp_path, capsys, text, message):
+    from mocap.cli import main
+
+    path = tmp_path / "s.yaml"
+    path.write_text(text)
+    assert main(["validate", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err and str(path) in err

@@ -97,3 +97,31 @@ def test_stage_with_checkpoint_is_not_trained_and_keyed_by_content(tmp_path: Pat
     key1 = stage_keys(resolve(text=text).spec)["imitator"]
     save_checkpoint(ckpt, {"weights": [1, 2, 4]})
     assert stage_keys(resolve(text=text).spec)["imitator"] != key1
+
+
+def test_a_second_run_into_a_busy_run_directory_is_refused(tmp_path: Path):
+    """Two runs into one directory would interleave metrics.jsonl: the second is refused at once."""
+    from mocap.pipeline import StageFailed, run_dir_lock
+
+    out = tmp_path / "runs" / "a"
+    out.mkdir(parents=True)
+    with run_dir_lock(out):
+        with pytest.raises(StageFailed, match=r"another mocap run \(pid \d+\) is writing to this run directory"):
+            run_pipeline(resolve(), PSET, out, console=quiet())
+        assert not (out / "metrics.jsonl").exists()
+    run_pipeline(resolve(), PSET, out, console=quiet())  # released: the run goes ahead
+    assert (out / "report.md").is_file()
+
+
+def test_rows_of_a_stage_attempt_killed_before_its_checkpoint_are_not_kept(tmp_path: Path):
+    """A stage killed after logging but before its first checkpoint (an eval stage always is) reruns
+    from scratch: its earlier rows go, so none is duplicated."""
+    out = tmp_path / "runs" / "a"
+    out.mkdir(parents=True)
+    stale = [{"stage": "imitator", "step": 1, "value": 99.0}, {"stage": "imitator", "step": 2, "value": 99.0}]
+    (out / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in stale))
+    run_pipeline(resolve(), PSET, out, console=quiet())
+    rows = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
+    steps = [(r["stage"], r["step"]) for r in rows]
+    assert steps == [("imitator", 1), ("imitator", 2), ("imitator", 3), ("latent", 1), ("latent", 2)]
+    assert all(r["value"] != 99.0 for r in rows)

@@ -44,6 +44,7 @@ from mocap.interfaces import Box, MultiDiscrete, StageResult, Trainer
 from mocap.progress import IterationProgress
 from mocap.rl.networks import ActorCritic, save_policy
 from mocap.rng import rng_state, set_rng_state
+from mocap.bounds import EnvCount, LayerWidth, LearningRate, LogStd, ThreadCount
 
 CHECKPOINT_FORMAT = "mocap.rl.ppo/1"
 CHECKPOINT_NAME = "ppo.pt"
@@ -140,7 +141,7 @@ class PPOParams(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    num_envs: int = Field(128, ge=1, description="parallel envs (PHC: 1536)")
+    num_envs: EnvCount = Field(128, description="parallel envs (PHC: 1536)")
     horizon: int = Field(64, ge=1, description="steps per env per iteration; batch = num_envs × horizon (PHC: 32)")
     max_consecutive_faults: int = Field(
         10, ge=0, description="stop after this many consecutive batches with non-finite values (each is skipped); 0: only skip"
@@ -150,7 +151,7 @@ class PPOParams(BaseModel):
     minibatch_size: int = Field(
         2048, ge=1, description="samples per gradient step; ≤ batch; a remainder is dropped each epoch (PHC: 16384)"
     )
-    lr: float = Field(3e-4, gt=0, description="Adam learning rate (PHC: 2e-5)")
+    lr: LearningRate = Field(3e-4, description="Adam learning rate (PHC: 2e-5)")
     lr_schedule: Literal["constant", "linear", "adaptive"] = Field(
         "constant",
         description="'linear' anneals lr to 0 over the budget; 'adaptive' divides lr by 1.5 after a minibatch whose KL "
@@ -159,8 +160,8 @@ class PPOParams(BaseModel):
         "(PHC: constant)",
     )
     desired_kl: float = Field(0.01, gt=0, description="KL target of the 'adaptive' schedule (rl_games / rsl_rl: 0.008-0.01)")
-    lr_min: float = Field(1e-6, gt=0, description="floor of the 'adaptive' schedule")
-    lr_max: float = Field(1e-2, gt=0, description="ceiling of the 'adaptive' schedule")
+    lr_min: LearningRate = Field(1e-6, description="floor of the 'adaptive' schedule")
+    lr_max: LearningRate = Field(1e-2, description="ceiling of the 'adaptive' schedule")
     gamma: float = Field(0.95, ge=0, le=1, description="discount γ (PHC: 0.99)")
     gae_lambda: float = Field(0.95, ge=0, le=1, description="GAE λ (PHC: 0.95)")
     clip: float = Field(0.2, gt=0, description="PPO ratio clip ε (PHC: 0.2)")
@@ -183,14 +184,13 @@ class PPOParams(BaseModel):
         description="the critic regresses value targets standardized by their running mean/std (updated once per "
         "batch; no PopArt output rescaling) (PHC: yes)",
     )
-    actor_hidden: list[int] = Field(default_factory=lambda: [512, 256], description="actor MLP hidden sizes (PHC: [1024, 512])")
-    critic_hidden: list[int] = Field(default_factory=lambda: [512, 256], description="critic MLP hidden sizes (PHC: [1024, 512])")
+    actor_hidden: list[LayerWidth] = Field(default_factory=lambda: [512, 256], description="actor MLP hidden sizes (PHC: [1024, 512])")
+    critic_hidden: list[LayerWidth] = Field(default_factory=lambda: [512, 256], description="critic MLP hidden sizes (PHC: [1024, 512])")
     activation: Literal["elu", "relu", "tanh", "silu", "gelu"] = Field("elu", description="hidden activation (PHC: relu)")
-    log_std_init: float = Field(-1.2, description="initial log σ of the Gaussian head (PHC: −2.9, fixed)")
+    log_std_init: LogStd = Field(-1.2, description="initial log σ of the Gaussian head (PHC: −2.9, fixed)")
     learn_std: bool = Field(True, description="train log σ (PHC: no, fixed σ)")
-    torch_threads: int | None = Field(
+    torch_threads: ThreadCount | None = Field(
         1,
-        ge=1,
         description="torch intra-op threads for this stage (None: keep the process setting, i.e. the spec's "
         "torch_threads or torch's default). 1 is safe whenever anything else shares the cores; on an otherwise idle "
         "2-core machine 2 threads make the update about 1.75x faster, but under contention they were several times "

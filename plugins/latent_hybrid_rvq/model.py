@@ -80,6 +80,7 @@ from mocap.rl.normalizer import RunningNormalizer
 from mocap.skeleton import Skeleton
 from mocap.state import Observations
 from mocap_hybrid_rvq.quantizers import Quantizer, ResidualVQ, VectorQuantizer
+from mocap.bounds import LayerWidth
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 from torch import Tensor, nn
 
@@ -143,9 +144,9 @@ class HybridParams(BaseModel):
         "per_level", description="commitment loss: sum over levels of ‖r_n‖² ([DEFAULT]) or ‖y − sg(ŷ_q)‖² on the total"
     )
     # ---------------------------------------------------------------------------- networks
-    encoder_hidden: list[int] = Field(default_factory=lambda: [512, 256], description="posterior MLP hidden sizes ([DEFAULT])")
-    prior_hidden: list[int] = Field(default_factory=lambda: [512, 256], description="prior MLP hidden sizes ([DEFAULT])")
-    decoder_hidden: list[int] = Field(default_factory=lambda: [512, 256], description="decoder MLP hidden sizes ([DEFAULT])")
+    encoder_hidden: list[LayerWidth] = Field(default_factory=lambda: [512, 256], description="posterior MLP hidden sizes ([DEFAULT])")
+    prior_hidden: list[LayerWidth] = Field(default_factory=lambda: [512, 256], description="prior MLP hidden sizes ([DEFAULT])")
+    decoder_hidden: list[LayerWidth] = Field(default_factory=lambda: [512, 256], description="decoder MLP hidden sizes ([DEFAULT])")
     activation: str = Field("silu", description="MLP activation ([DEFAULT] SiLU as PULSE): " + ", ".join(sorted(ACTIVATIONS)))
     log_std_bounds: tuple[float, float] = Field((-5.0, 2.0), description="'continuous': clamp of the predicted log σ")
     # ------------------------------------------------------------------------ observations

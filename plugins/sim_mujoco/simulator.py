@@ -93,6 +93,7 @@ from mujoco import rollout as mj_rollout
 from pydantic import BaseModel, ConfigDict, Field
 from torch import Tensor
 
+from mocap.bounds import ThreadCount
 from mocap.interfaces import Simulator
 from mocap.rotations import quat_apply, quat_conjugate, quat_normalize
 from mocap.skeleton import Skeleton
@@ -132,7 +133,7 @@ class MujocoParams(BaseModel):
 
     timestep: float = Field(1.0 / 120.0, gt=0.0, le=0.05, description="physics step, s")
     substeps: int = Field(4, ge=1, le=64, description="physics steps per control step (1/30 s by default)")
-    threads: int | None = Field(None, ge=1, description="rollout worker threads (default: all cores)")
+    threads: ThreadCount | None = Field(None, description="rollout worker threads (default: all cores)")
     chunk_size: int | None = Field(None, ge=1, description="envs per thread-pool task (default: MuJoCo's N / (10 threads))")
     iterations: int = Field(20, ge=1, description="constraint solver iterations")
     ls_iterations: int = Field(10, ge=1, description="solver line-search iterations")
@@ -142,7 +143,7 @@ class MujocoParams(BaseModel):
     max_qacc: float = Field(1.0e6, gt=0.0, description="instability: |change of qvel| / dt over a control step above this")
     terrain: TerrainParams | None = Field(None, description="height-field ground (default: the plane z = 0)")
     target: TargetParams | None = Field(None, description="a movable box per env (strike task)")
-    markers: int = Field(0, ge=0, description="visual-only marker spheres per env")
+    markers: int = Field(0, ge=0, le=256, description="visual-only marker spheres per env")
     marker_radius: float = Field(0.05, gt=0.0)
     marker_rgba: tuple[float, float, float, float] = (0.95, 0.15, 0.15, 1.0)
     actuator_model: ActuatorModelParams | None = Field(
