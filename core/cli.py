@@ -227,8 +227,24 @@ def cmd_schema(
     if out is None:
         sys.stdout.write(text + "\n")
     else:
-        out.write_text(text + "\n", encoding="utf-8")
+        write_user_file(out, text + "\n", "--out")
         console.print(f"wrote {out}")
+
+
+def write_user_file(path: Path, text: str, option: str) -> None:
+    """Write ``text`` to a file the user named; a path that cannot be written (a missing folder, a
+    directory, no permission, a full disk) is a :class:`UserError` naming it, not a traceback."""
+    from mocap.checkpoint import StorageError, atomic_write_text
+
+    path = Path(path)
+    if path.is_dir():
+        raise UserError(f"{option} {path}: a directory; give a file name (e.g. {path / 'mocap.schema.json'})")
+    if not path.parent.is_dir():
+        raise UserError(f"{option} {path}: the folder {path.parent} does not exist; create it or choose another path")
+    try:
+        atomic_write_text(path, text)
+    except StorageError as exc:
+        raise UserError(f"{option} {exc}") from None
 
 
 def cmd_plugins(as_json: Annotated[bool, typer.Option("--json", help="machine-readable output")] = False) -> None:
@@ -264,7 +280,8 @@ def cmd_plugins(as_json: Annotated[bool, typer.Option("--json", help="machine-re
             table.add_column(col)
         for p in pset.plugins:
             table.add_row(p.name, p.package, p.version, "\n".join(p.hooks), "\n".join(registered.get(p.name, [])))
-        console.print(table)
+        # piped (not a terminal): no 80-column limit, so names are never cut ("trainer:imitati…")
+        (console if console.is_terminal else Console(width=1000, soft_wrap=True)).print(table)
     for dup in duplicates:
         err_console.print(
             f"[red]error:[/] {dup['kind']} {dup['name']!r} is registered by more than one plugin: "

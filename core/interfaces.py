@@ -37,11 +37,17 @@ if TYPE_CHECKING:  # pragma: no cover
 # --------------------------------------------------------------------------------------- spaces
 @dataclass(frozen=True)
 class Box:
-    """A continuous action space of ``shape`` with elementwise bounds (``inf`` for unbounded)."""
+    """A continuous action space of ``shape`` with elementwise bounds (``inf`` for unbounded).
+
+    ``exploration_sigma``: the exploration σ the space's method prescribes for a Gaussian policy on
+    it (PULSE Sec. 3.3: a fixed 0.22 on the prior residual), used by PPO when the spec leaves
+    ``log_std_init`` unset; None: no prescription.
+    """
 
     shape: tuple[int, ...]
     low: float = float("-inf")
     high: float = float("inf")
+    exploration_sigma: float | None = None
 
 
 @dataclass(frozen=True)

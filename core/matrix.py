@@ -46,6 +46,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from mocap.metric_display import format_cell, mean_ci95, metric_label
 from mocap.spec import SpecError, SpecIssue, _rebase_paths, apply_overrides, load_document, validate_document
 
 
@@ -315,9 +316,9 @@ def comparison(cells: list[Cell], out_dir: Path, seed_axis: str = "seed") -> dic
         summary[key] = {}
         for m in metric_names:
             vals = [rows[n]["metrics"][m] for n in names if m in rows[n]["metrics"]]
-            mean = sum(vals) / len(vals)
-            std = math.sqrt(sum((v - mean) ** 2 for v in vals) / len(vals)) if len(vals) > 1 else 0.0
-            summary[key][m] = {"mean": mean, "std": std, "n": len(vals)}
+            mean, half = mean_ci95(vals)
+            std = math.sqrt(sum((v - mean) ** 2 for v in vals) / (len(vals) - 1)) if len(vals) > 1 else None
+            summary[key][m] = {"mean": mean, "std": std, "ci95": half, "n": len(vals)}
     data: dict[str, Any] = {"cells": rows, "groups": summary}
     plots = _plots(groups, summary, out_dir)
     data["plots"] = [name for name, _ in plots if name]
@@ -338,8 +339,8 @@ def _plots(groups: dict[str, list[str]], summary: dict[str, dict[str, dict[str, 
         return [("", str(exc))]
     except Exception as exc:  # noqa: BLE001 - a plot must never fail a finished comparison
         return [("", f"plots skipped: {type(exc).__name__}: {exc}")]
-    captions = {COMPARISON_CURVES: "learning curves: mean ± std over seeds"}
-    return [(p.name, captions.get(p.name, "final metrics: mean ± std over seeds")) for p in written]
+    captions = {COMPARISON_CURVES: "learning curves: mean ± std over seeds (a band only where a cell has several seeds)"}
+    return [(p.name, captions.get(p.name, "final metrics: mean, with a 95% interval where a cell has several seeds")) for p in written]
 
 
 def render_plots(plots: list[tuple[str, str]]) -> str:
@@ -379,18 +380,20 @@ def render(summary: dict[str, dict[str, dict[str, float]]]) -> str:
     present = [m for m in KEY_METRICS if any(m in g for g in summary.values())]
     if not present:
         present = sorted(set().union(*(g.keys() for g in summary.values())))[:8]
-    head = ["cell", *present]
-    lines = ["# Comparison", "", "final stage metrics per cell; mean ± std over seeds where a cell has several runs (n)", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    head = ["cell", *(metric_label(m) for m in present)]
+    several = any(v.get("n", 1) > 1 for g in summary.values() for v in g.values())
+    note = (
+        "final stage metrics per cell; where a cell has several runs (seeds): mean ± half-width of the 95% confidence "
+        "interval of the mean (Student's t), with n"
+        if several
+        else "final stage metrics per cell (one run each)"
+    )
+    lines = ["# Comparison", "", note, "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for key, metrics in summary.items():
         cells = []
         for m in present:
             v = metrics.get(m)
-            if v is None:
-                cells.append("")
-            elif v["n"] == 1:
-                cells.append(f"{v['mean']:.3g}")
-            else:
-                cells.append(f"{v['mean']:.3g} ± {v['std']:.2g} (n={v['n']})")
+            cells.append("" if v is None else format_cell(v["mean"], v.get("ci95"), int(v.get("n", 1))))
         lines.append("| " + " | ".join([key, *cells]) + " |")
     return "\n".join(lines) + "\n"
 

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Sequence
 
 from mocap.checkpoint import atomic_write_text, hardware, package_versions
+from mocap.metric_display import metric_label
 
 if TYPE_CHECKING:  # pragma: no cover
     from mocap.pipeline import StageRecord
@@ -280,11 +281,13 @@ def write_comparison_plots(
         for i, m in enumerate(bars):
             ax = fig.add_subplot(rows, cols, i + 1)
             means = [summary[g][m]["mean"] if m in summary[g] else float("nan") for g in labels]
-            stds = [summary[g][m]["std"] if m in summary[g] else 0.0 for g in labels]
-            ax.bar(range(len(labels)), means, yerr=stds, capsize=4, color=[f"C{j % 10}" for j in range(len(labels))])
+            # a 95% interval of the mean where a group has several seeds; no error bar for a single run
+            half = [summary[g][m].get("ci95") if m in summary[g] else None for g in labels]
+            yerr = [h if h is not None else 0.0 for h in half] if any(h is not None for h in half) else None
+            ax.bar(range(len(labels)), means, yerr=yerr, capsize=4, color=[f"C{j % 10}" for j in range(len(labels))])
             ax.set_xticks(range(len(labels)))
             ax.set_xticklabels(labels, rotation=20, ha="right", fontsize=7)
-            ax.set_title(m, fontsize=9)
+            ax.set_title(metric_label(m), fontsize=9)
             ax.tick_params(axis="y", labelsize=7)
             ax.grid(axis="y", alpha=0.3)
         fig.tight_layout()

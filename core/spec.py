@@ -129,7 +129,40 @@ def _fmt_value(value: Any) -> str:
     return text if len(text) <= 80 else text[:77] + "..."
 
 
-def _issues_from_validation(exc: ValidationError, prefix: tuple[Any, ...] = ()) -> list[SpecIssue]:
+def _model_at(model: type[BaseModel] | None, loc: tuple[Any, ...]) -> type[BaseModel] | None:
+    """The pydantic model that holds the field at ``loc`` (list indices and dict keys skipped)."""
+    import typing
+
+    def first_model(tp: Any) -> type[BaseModel] | None:
+        if isinstance(tp, type) and issubclass(tp, BaseModel):
+            return tp
+        for arg in typing.get_args(tp):
+            found = first_model(arg)
+            if found is not None:
+                return found
+        return None
+
+    for part in loc:
+        if model is None:
+            return None
+        if isinstance(part, str) and part in model.model_fields:
+            model = first_model(model.model_fields[part].annotation)
+    return model
+
+
+def _unknown_field_hint(model: type[BaseModel] | None, name: Any) -> str:
+    """``; did you mean 'lr'? allowed fields: ...`` (difflib), or "" without a model."""
+    import difflib
+
+    if model is None:
+        return ""
+    allowed = list(model.model_fields)
+    close = difflib.get_close_matches(str(name), allowed, n=1, cutoff=0.6)
+    hint = f"; did you mean {close[0]!r}?" if close else ""
+    return f"{hint} allowed fields: {', '.join(allowed)}"
+
+
+def _issues_from_validation(exc: ValidationError, prefix: tuple[Any, ...] = (), model: type[BaseModel] | None = None) -> list[SpecIssue]:
     issues = []
     for err in exc.errors(include_url=False):
         loc = prefix + tuple(err.get("loc", ()))
@@ -139,7 +172,9 @@ def _issues_from_validation(exc: ValidationError, prefix: tuple[Any, ...] = ()) 
         if err["type"] not in ("missing",) and "input" in err and not isinstance(err["input"], dict):
             msg += f" (got {_fmt_value(err['input'])})"
         if err["type"] == "extra_forbidden":
+            local = tuple(err.get("loc", ()))
             msg = "unknown field" + (f" (got {_fmt_value(err.get('input'))})" if err.get("input") is not None else "")
+            msg += _unknown_field_hint(_model_at(model, local[:-1]), local[-1] if local else "")
         issues.append(SpecIssue(".".join(str(p) for p in loc), msg))
     return issues
 
@@ -389,7 +424,7 @@ def validate_document(
     try:
         spec = Spec.model_validate(doc)
     except ValidationError as exc:
-        raise SpecError(source, _issues_from_validation(exc)) from None
+        raise SpecError(source, _issues_from_validation(exc, model=Spec)) from None
     issues: list[SpecIssue] = []
     resolved: dict[str, BaseModel | None] = {}
     for path, kind, ref in iter_components(spec):
@@ -405,7 +440,7 @@ def validate_document(
         try:
             model = comp.validate_params(ref.params)
         except ValidationError as exc:
-            issues.extend(_issues_from_validation(exc, tuple(path.split(".")) + ("params",)))
+            issues.extend(_issues_from_validation(exc, tuple(path.split(".")) + ("params",), comp.params))
             continue
         except ValueError as exc:
             issues.append(SpecIssue(f"{path}.params", str(exc)))

@@ -62,7 +62,7 @@ def test_matrix_runs_cells_shares_stages_and_writes_a_comparison(tmp_path: Path)
     assert CountTrainer.calls.count("imitator") == 2 and CountTrainer.calls.count("latent") == 4
     data = json.loads((tmp_path / "runs" / "cmp" / "comparison.json").read_text())
     assert set(data["groups"]) == {"latent=toy_latent", "latent=toy_latent_b"}
-    assert data["groups"]["latent=toy_latent_b"]["latent/iterations"] == {"mean": 4.0, "std": 0.0, "n": 2}
+    assert data["groups"]["latent=toy_latent_b"]["latent/iterations"] == {"mean": 4.0, "std": 0.0, "ci95": 0.0, "n": 2}
     assert "latent=toy_latent_b" in (tmp_path / "runs" / "cmp" / "comparison.md").read_text()
 
 

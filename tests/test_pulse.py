@@ -265,7 +265,13 @@ def test_zero_residual_decodes_the_prior_mean_and_residual_is_linear():
     assert torch.equal(lat.decode_action(obs, lat.to_latent(obs, zero)), lat.decode_action(obs, mu_p))
     r1, r2 = torch.randn(5, 3), torch.randn(5, 3)
     assert close(lat.to_latent(obs, r1 + r2) - mu_p, r1 + r2, atol=1e-6)
-    assert lat.task_action_space == Box((3,)) and lat.task_log_std == pytest.approx(math.log(0.22))
+    assert lat.task_action_space == Box((3,), exploration_sigma=0.22)
+    # PPO's Gaussian starts at that sigma when the spec leaves log_std_init unset (issue 27 item 8: it was dead)
+    from mocap.rl.ppo import initial_log_std
+
+    assert initial_log_std(None, lat.task_action_space) == pytest.approx(math.log(0.22))
+    assert initial_log_std(-2.0, lat.task_action_space) == -2.0
+    assert initial_log_std(None, Box((3,))) == -1.2
     absolute = tiny_latent(1, task_action="absolute")
     assert torch.equal(absolute.to_latent(obs, r1), r1)
     standard = tiny_latent(1, prior="standard")

@@ -187,7 +187,11 @@ class PPOParams(BaseModel):
     actor_hidden: list[LayerWidth] = Field(default_factory=lambda: [512, 256], description="actor MLP hidden sizes (PHC: [1024, 512])")
     critic_hidden: list[LayerWidth] = Field(default_factory=lambda: [512, 256], description="critic MLP hidden sizes (PHC: [1024, 512])")
     activation: Literal["elu", "relu", "tanh", "silu", "gelu"] = Field("elu", description="hidden activation (PHC: relu)")
-    log_std_init: LogStd = Field(-1.2, description="initial log σ of the Gaussian head (PHC: −2.9, fixed)")
+    log_std_init: LogStd | None = Field(
+        None,
+        description="initial log σ of the Gaussian head; None: the action space's own exploration σ where its method "
+        "prescribes one (PULSE's task_sigma 0.22, Sec. 3.3), else -1.2 (PHC: −2.9, fixed)",
+    )
     learn_std: bool = Field(True, description="train log σ (PHC: no, fixed σ)")
     torch_threads: ThreadCount | None = Field(
         1,
@@ -234,7 +238,7 @@ class PPOTrainer(Trainer):
             actor_hidden=p.actor_hidden,
             critic_hidden=p.critic_hidden,
             activation=p.activation,
-            log_std_init=p.log_std_init,
+            log_std_init=initial_log_std(p.log_std_init, action_space),
             learn_std=p.learn_std,
             normalize_obs=p.normalize_obs,
             obs_clip=p.obs_clip,
@@ -573,6 +577,19 @@ def _own_state(ck: dict[str, Any], rank: int) -> dict[str, Any] | None:
     if rank == 0:
         return {k: ck[k] for k in ("env", "obs", "rng", "episode_window")}
     return (ck.get("rank_states") or {}).get(rank)
+
+
+#: initial log σ when neither the spec nor the action space sets one
+DEFAULT_LOG_STD = -1.2
+
+
+def initial_log_std(spec_value: float | None, action_space: Any) -> float:
+    """The spec's ``log_std_init``, else log of the action space's ``exploration_sigma`` (a
+    :class:`~mocap.interfaces.Box` that prescribes one), else :data:`DEFAULT_LOG_STD`."""
+    if spec_value is not None:
+        return float(spec_value)
+    sigma = action_space.exploration_sigma if isinstance(action_space, Box) else None
+    return math.log(sigma) if sigma is not None else DEFAULT_LOG_STD
 
 
 def adapt_lr(lr: float, kl: float, desired_kl: float, lr_min: float, lr_max: float) -> float:

@@ -35,7 +35,6 @@ Provenance tags in the parameter descriptions: [P] paper, [CODE] official code (
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Literal
 
@@ -308,11 +307,6 @@ class PulseLatent(LatentSpace):
     def device(self) -> torch.device:
         return self.proprio_norm.mean.device
 
-    @property
-    def task_log_std(self) -> float:
-        """log of the fixed task exploration σ (:attr:`PulseParams.task_sigma`), for the task policy's Gaussian."""
-        return math.log(self.params.task_sigma)
-
     def attach_imitator(self, imitator: Imitator) -> "PulseLatent":
         """Use ``imitator.to_pd_targets`` to turn decoder outputs into PD targets (:meth:`decoder`)."""
         self._pd_map = imitator.to_pd_targets
@@ -464,7 +458,7 @@ class PulseLatent(LatentSpace):
         'vq': one code index per partition (``MultiDiscrete((K,) * G)``, NCP-style; ``task_action`` unused)."""
         if self.vq is not None:
             return MultiDiscrete((self.vq.codebook_size,) * self.vq.partitions)
-        return Box((self.latent_dim,))
+        return Box((self.latent_dim,), exploration_sigma=self.params.task_sigma)
 
     def to_latent(self, obs: Observations, task_action: Tensor) -> Tensor:
         """Eq. 4: ``z = μ^p(s^p) + z^task`` ('residual'), or ``z = z^task`` ('absolute'); sphere-projected

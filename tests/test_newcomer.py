@@ -1,0 +1,84 @@
+"""The newcomer's path (issue 26): commands a new user types give one clear line, never a
+traceback, and listings are not cut when piped."""
+
+from __future__ import annotations
+
+from mocap.cli import main
+
+
+def test_schema_out_into_a_missing_folder_or_a_directory_is_one_error(tmp_path, capsys):
+    assert main(["schema", "--out", str(tmp_path / "nope" / "x.json")]) == 2
+    err = capsys.readouterr().err
+    assert "does not exist" in err and "Traceback" not in err
+    assert main(["schema", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "a directory" in err and "Traceback" not in err
+    assert main(["schema", "--out", str(tmp_path / "s.json")]) == 0
+    assert (tmp_path / "s.json").read_text().startswith("{")
+
+
+def test_plugins_listing_is_not_truncated_when_piped(capsys):
+    assert main(["plugins"]) == 0
+    out = capsys.readouterr().out
+    assert "trainer:imitation_eval" in out
+    assert "…" not in out
+
+
+# ---------------------------------------------------------------------------- report numbers
+import math  # noqa: E402
+
+import pytest  # noqa: E402
+from hypothesis import given  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+from mocap.metric_display import format_cell, mean_ci95, metric_label, t_critical_95  # noqa: E402
+
+
+def test_single_runs_show_no_interval_and_several_show_the_95_percent_one():
+    assert mean_ci95([3.0]) == (3.0, None)
+    assert format_cell(3.0, None, 1) == "3"
+    mean, half = mean_ci95([1.0, 2.0, 3.0])
+    # s = 1, t_{0.975,2} = 4.303: half-width 4.303 / sqrt(3)
+    assert mean == 2.0 and half == pytest.approx(4.303 / math.sqrt(3))
+    assert format_cell(mean, half, 3) == "2 ± 2.5 (n=3)"
+
+
+@given(st.lists(st.floats(-1e3, 1e3), min_size=2, max_size=40), st.floats(-100, 100))
+def test_interval_is_shift_invariant_and_shrinks_with_t(values, shift):
+    m1, h1 = mean_ci95(values)
+    m2, h2 = mean_ci95([v + shift for v in values])
+    assert m2 == pytest.approx(m1 + shift, abs=1e-6) and h2 == pytest.approx(h1, abs=1e-6)
+    assert t_critical_95(len(values) - 1) >= 1.96
+
+
+def test_metric_labels_carry_units():
+    assert metric_label("eval/mpjpe_g") == "MPJPE-g (mm)"
+    assert metric_label("eval/imitation/mpjpe_g_succ") == "imitation MPJPE-g (tracked) (mm)"
+    assert metric_label("eval/generation/time_to_fall_s") == "generation time to fall (s)"
+    assert metric_label("task/episode/normalized_return") == "normalized return"
+    assert metric_label("eval/some_plugin_metric") == "eval/some_plugin_metric"
+
+
+def test_comparison_table_of_single_runs_says_so(tmp_path):
+    from mocap.matrix import render
+
+    text = render({"latent=pulse": {"eval/mpjpe_g": {"mean": 87.0, "std": None, "ci95": None, "n": 1}}})
+    assert "MPJPE-g (mm)" in text and "| 87 |" in text
+    assert "±" not in text and "n=1" not in text and "one run each" in text
+
+
+@pytest.mark.parametrize(
+    "override, expect",
+    [
+        ("imitator.trainer.params.lrr=0.1", "did you mean 'lr'?"),
+        ("imitator.params.episode_step=10", "did you mean 'episode_steps'?"),
+        ("seeed=1", "did you mean 'seed'?"),
+    ],
+)
+def test_unknown_fields_get_a_suggestion_and_the_allowed_fields(override, expect, capsys):
+    from pathlib import Path
+
+    spec = Path(__file__).resolve().parents[1] / "specs/imitator/amp_bundled.yaml"
+    assert main(["validate", str(spec), "--set", override]) == 2
+    err = capsys.readouterr().err
+    assert "unknown field" in err and expect in err and "allowed fields:" in err
