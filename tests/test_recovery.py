@@ -168,3 +168,36 @@ def test_bonus_recovery_episodes_replace_terminations(amp, walk):  # noqa: F811
         assert not bool(res.terminated.any())  # every termination became a bonus recovery episode
         windows += int((env.recovery_left == 6).sum())
     assert windows > 0
+
+
+@SETTINGS
+@given(st.lists(st.floats(0.0, 10.0), min_size=1, max_size=8), st.lists(st.floats(0.0, 10.0), min_size=1, max_size=8))
+def test_point_goal_code_form_is_scaled_and_clipped(prev, now):
+    """The official code's point reward: 9 min(d_{t-1} - d_t, 1/3) (issue 27 item 5)."""
+    from mocap_phc.recovery import point_goal_reward
+
+    n = min(len(prev), len(now))
+    p, d = torch.tensor(prev[:n], dtype=torch.float64), torch.tensor(now[:n], dtype=torch.float64)
+    r = point_goal_reward(p, d, "code")
+    assert torch.allclose(r, 9.0 * torch.minimum(p - d, torch.full_like(p, 1.0 / 3.0)))
+    assert bool((r <= 3.0 + 1e-12).all())
+
+
+@pytest.mark.parametrize("weight", [0.1, 1.0])
+def test_energy_penalty_is_weighted_while_recovering(amp, walk, weight):  # noqa: F811
+    """PHC Eq. 4: r = 0.5 r^point + 0.5 r^amp + 0.1 r^energy while far: the env's energy term carries
+    far_energy_weight (0.1 by default) for far envs; the logged reward/energy is the weighted one."""
+    from mocap_phc.recovery import FailStateParams
+
+    fs = FailStateParams(far_init_prob=1.0, far_init_range=(3.0, 4.0), recovery_steps=20)
+    env = _env(amp, walk, fs, recovery_goal=RecoveryGoalParams(reward="point", far_energy_weight=weight))
+    env.reset()
+    for _ in range(5):  # past the code form's energy warm-up
+        res = env.step(0.3 * torch.ones(4, amp.num_dofs))
+    from mocap_phc.rewards import energy_penalty
+
+    st_ = env.sim.state
+    raw = energy_penalty(st_.dof_force, st_.dof_vel, env.params.energy_form, env.params.energy_coef, env.progress)
+    far = res.info["recovery/far"] > 0.5
+    assert bool(far.any()) and bool((raw[far] < 0).all())
+    torch.testing.assert_close(res.info["reward/energy"][far].double(), weight * raw[far].double(), atol=1e-9, rtol=1e-5)

@@ -471,9 +471,11 @@ class ImitationEnv:
             if rg.reward == "point":  # PHC Eq. 4: point-goal reward while far
                 from mocap_phc.recovery import point_goal_reward
 
-                r_im = torch.where(far.to(r_im.device), point_goal_reward(self.root_dist, dist).to(r_im), r_im)
+                r_im = torch.where(far.to(r_im.device), point_goal_reward(self.root_dist, dist, rg.point_form).to(r_im), r_im)
         self.root_dist = dist
         energy = energy_penalty(state.dof_force, state.dof_vel, p.energy_form, p.energy_coef, self.progress)
+        if rg is not None and rg.reward == "point":  # PHC Eq. 4: 0.1 r^energy while recovering
+            energy = torch.where(far.to(energy.device), rg.far_energy_weight * energy, energy)
         amp_info: dict[str, Tensor] = {}
         if self.amp_trainer is not None:
             assert self.amp_obs is not None and self.amp_history is not None

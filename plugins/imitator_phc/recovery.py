@@ -42,6 +42,17 @@ class RecoveryGoalParams(BaseModel):
         "point-goal term r = d_{t-1} - d_t (the decrease of the root-to-reference-root distance, m per control step; "
         "[P] for the recovery primitive and the composer) or 'imitation' = the imitation reward as everywhere else",
     )
+    point_form: Literal["paper", "code"] = Field(
+        "paper",
+        description="the point-goal term: 'paper' = d_{t-1} - d_t (PHC Eq. 4); 'code' = 9 min(d_{t-1} - d_t, 1/3) (the "
+        "official code's compute_point_goal_reward: scaled and clipped)",
+    )
+    far_energy_weight: float = Field(
+        0.1,
+        ge=0.0,
+        description="weight of the energy penalty while far with reward 'point' (PHC Eq. 4: 0.5 r^point + 0.5 r^amp + "
+        "0.1 r^energy; [C] keeps the penalty inside the task reward with a smaller coefficient instead); 1 = unchanged",
+    )
 
 
 _FIELDS = HUMANOID_FIELDS
@@ -173,9 +184,14 @@ def generate_fall_states(sim: Any, skeleton: Any, count: int, params: FailStateP
 
 
 
-def point_goal_reward(prev_dist: Tensor, dist: Tensor) -> Tensor:
-    """PHC Eq. 4's point-goal term (Won et al.): the decrease of the root distance to the reference root."""
-    return prev_dist - dist
+def point_goal_reward(prev_dist: Tensor, dist: Tensor, form: Literal["paper", "code"] = "paper") -> Tensor:
+    """PHC Eq. 4's point-goal term (Won et al.): the decrease of the root distance to the reference
+    root, ``d_{t-1} - d_t`` ('paper'), or the official code's ``9 min(d_{t-1} - d_t, 1/3)`` ('code')."""
+    if form == "paper":
+        return prev_dist - dist
+    if form == "code":
+        return 9.0 * (prev_dist - dist).clamp_max(1.0 / 3.0)
+    raise ValueError(f"unknown point-goal form {form!r}; choose 'paper' or 'code'")
 
 
 def moved(state: HumanoidState, shift: Tensor) -> HumanoidState:
