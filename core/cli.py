@@ -136,7 +136,7 @@ def cmd_run(
         typer.Option(
             "--executor",
             help="comparison specs: where cells run: 'local' (this process, or --jobs local processes) or "
-            "'ray' (Ray tasks, at most --jobs at a time; pip install 'mocap[ray]')",
+            "'ray' (Ray tasks, at most --jobs at a time; pip install 'mocap\\[ray]')",
         ),
     ] = "local",
     ray_address: Annotated[

@@ -76,7 +76,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 from torch import Tensor
 
 from mocap import distributed as dist
-from mocap.checkpoint import load_checkpoint, save_checkpoint
+from mocap.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from mocap.faults import FaultGuard
 from mocap.rng import rng_state, set_rng_state
 from mocap.hooks import hookimpl
@@ -201,7 +201,7 @@ def load_latent_state(path: Path, map_location: str | torch.device = "cpu") -> d
         return {"config": data.get("config"), "state_dict": data["state_dict"], "extra": data.get("extra", {}), "spec": data.get("spec")}
     if fmt == CHECKPOINT_FORMAT:
         return {"config": data.get("latent_config"), "state_dict": data["student"], "extra": {}, "spec": data.get("spec")}
-    raise ValueError(f"{path}: not a latent-space file (format {fmt!r}, expected {LATENT_FORMAT!r} or {CHECKPOINT_FORMAT!r})")
+    raise CheckpointError(f"{path}: not a distilled latent-space file (format {fmt!r}, expected {LATENT_FORMAT!r} or {CHECKPOINT_FORMAT!r})")
 
 
 # --------------------------------------------------------------------------------- episodes

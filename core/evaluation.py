@@ -474,7 +474,10 @@ def _from_file(target: Path, plugins: Any) -> EvalTarget:
     spec_yaml = data.get("spec") if isinstance(data, dict) else None
     if not spec_yaml:
         raise UserError(f"{target}: the checkpoint carries no spec; evaluate its run directory instead")
-    resolved = validate_document(yaml.safe_load(spec_yaml), plugins, source=f"{target} (embedded spec)")
+    from mocap.export import resolve_embedded_paths
+
+    doc = resolve_embedded_paths(yaml.safe_load(spec_yaml), target.parent)
+    resolved = validate_document(doc, plugins, source=f"{target} (embedded spec)")
     from mocap.distill import CHECKPOINT_FORMAT as DISTILL_FORMAT, LATENT_FORMAT
 
     if data.get("format") in (LATENT_FORMAT, DISTILL_FORMAT) or (resolved.spec.imitator is None and resolved.spec.latent is not None):
@@ -603,6 +606,16 @@ def load_evaluation_target(target: Path, plugins: Any) -> EvalTarget:
     return _from_file(target, plugins)
 
 
+def _is_distilled(path: Path) -> bool:
+    """Whether a latent checkpoint is a distilled latent space (``mocap.latent`` / ``mocap.distill``
+    format, decoded through the imitator it was distilled from) rather than a latent space with a
+    policy of its own (VMP's tracker)."""
+    from mocap.checkpoint import load_checkpoint
+    from mocap.distill import CHECKPOINT_FORMAT, LATENT_FORMAT
+
+    return load_checkpoint(path).get("format") in (LATENT_FORMAT, CHECKPOINT_FORMAT)
+
+
 def build_evaluation_target(
     target: EvalTarget, plugins: Any, *, motions: str | None = None, device: str = "cpu", use_latent: bool = True
 ) -> LoadedTarget:
@@ -627,7 +640,10 @@ def build_evaluation_target(
     def make_sim(n: int) -> Simulator:
         return sim_component.build(sim_params, skeleton=skeleton, num_envs=n, seed=spec.seed)
 
-    if spec.imitator is None:  # a latent space that imitates on its own (VMP's tracker)
+    own_tracker = spec.imitator is None or (
+        use_latent and target.latent_checkpoint is not None and not _is_distilled(Path(target.latent_checkpoint))
+    )
+    if own_tracker:  # a latent space that imitates on its own (VMP's tracker), even where the spec names an imitator
         from mocap.cli import UserError
 
         latent = plugins.get("latent", spec.latent.name).build(

@@ -47,7 +47,9 @@ def export_run(run_dir: Path, dest: Path) -> Path:
             target = src
         else:
             target = dest / name
-            atomic_write_bytes(target, src.read_bytes())  # a full disk leaves no half-copied file
+            # the copy's embedded spec names its dependencies relative to DEST (a run's own spec
+            # holds absolute paths of this machine); a full disk leaves no half-copied file
+            atomic_write_bytes(target, with_relative_embedded_paths(src, dest))
         section["checkpoint"] = os.path.relpath(target.resolve(), dest.resolve())
         section.pop("trainer", None)
         exported.append(stage)
@@ -57,6 +59,58 @@ def export_run(run_dir: Path, dest: Path) -> Path:
     header = f"# Exported from the run {run_dir.name} by `mocap export`; checkpoint paths are relative to this file.\n"
     atomic_write_text(out, header + yaml.safe_dump(doc, sort_keys=False))
     return out
+
+
+STAGE_SECTIONS = ("imitator", "latent", "task")
+
+
+def resolve_embedded_paths(doc: Any, base: Path) -> Any:
+    """A checkpoint's embedded spec with its stages' relative ``checkpoint:`` paths resolved
+    against ``base`` (the checkpoint file's folder); absolute paths are kept."""
+    if not isinstance(doc, dict):
+        return doc
+    for stage in STAGE_SECTIONS:
+        section = doc.get(stage)
+        ck = section.get("checkpoint") if isinstance(section, dict) else None
+        if isinstance(ck, str) and ck and not Path(ck).is_absolute():
+            section["checkpoint"] = str(Path(base) / ck)
+    return doc
+
+
+def relative_spec_text(spec_yaml: str, dest: Path, *, root_map: tuple[str, str] | None = None) -> str:
+    """``spec_yaml`` with every stage's ``checkpoint:`` relative to ``dest``. ``root_map`` =
+    ``(old prefix, new prefix)`` rewrites absolute paths of another machine first."""
+    doc = yaml.safe_load(spec_yaml)
+    if not isinstance(doc, dict):
+        return spec_yaml
+    for stage in STAGE_SECTIONS:
+        section = doc.get(stage)
+        ck = section.get("checkpoint") if isinstance(section, dict) else None
+        if not (isinstance(ck, str) and ck):
+            continue
+        path = ck
+        if root_map is not None and path.startswith(root_map[0]):
+            path = root_map[1] + path[len(root_map[0]) :]
+        if Path(path).is_absolute():
+            section["checkpoint"] = os.path.relpath(Path(path).resolve(), Path(dest).resolve())
+    return yaml.safe_dump(doc, sort_keys=False)
+
+
+def with_relative_embedded_paths(src: Path, dest: Path, *, root_map: tuple[str, str] | None = None) -> bytes:
+    """The bytes of checkpoint ``src`` re-saved with its embedded spec's paths relative to ``dest``
+    (:func:`relative_spec_text`); loaded and saved without running any code."""
+    import io
+
+    import torch
+
+    from mocap.checkpoint import load_checkpoint
+
+    data = load_checkpoint(src)
+    if isinstance(data.get("spec"), str):
+        data["spec"] = relative_spec_text(data["spec"], dest, root_map=root_map)
+    buffer = io.BytesIO()
+    torch.save(data, buffer)
+    return buffer.getvalue()
 
 
 @hookimpl

@@ -207,6 +207,7 @@ class StageRecord:
     result: StageResult
     reused: bool
     seconds: float
+    trained_seconds: float | None = None  # a reused artifact: how long its training took when it was made
 
 
 class _StopFlag:
@@ -401,7 +402,7 @@ def _run_stage_locked(
             for item in published.iterdir():
                 if item.is_file():
                     shutil.copy2(item, out_dir / item.name)
-        return StageRecord(stage, key, workdir, result, True, 0.0)
+        return StageRecord(stage, key, workdir, result, True, 0.0, _read_seconds(done) if main else None)
     checkpoint = getattr(section, "checkpoint", None)
     if checkpoint is not None:
         if not dist.broadcast_object(Path(checkpoint).is_file()):
@@ -488,6 +489,15 @@ def _read_result(done: Path) -> StageResult:
     return StageResult(checkpoint=Path(ckpt) if ckpt else None, metrics=data.get("metrics", {}))
 
 
+def _read_seconds(done: Path) -> float | None:
+    """The training time recorded in an artifact's DONE.json (None if absent or unreadable)."""
+    try:
+        value = json.loads(done.read_text(encoding="utf-8")).get("seconds")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return float(value) if isinstance(value, (int, float)) else None
+
+
 def _write_stages(out_dir: Path, records: list[StageRecord], seed: int | None = None) -> None:
     atomic_write_json(
         out_dir / "stages.json",
@@ -501,6 +511,7 @@ def _write_stages(out_dir: Path, records: list[StageRecord], seed: int | None = 
                 "metrics": r.result.metrics,
                 "reused": r.reused,
                 "seconds": round(r.seconds, 2),
+                "trained_seconds": round(r.trained_seconds, 2) if r.trained_seconds is not None else None,
             }
             for r in records
         ],

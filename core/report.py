@@ -34,6 +34,16 @@ def _fmt(value: object) -> str:
     return str(value)
 
 
+def _reused_note(records: list["StageRecord"]) -> str:
+    """``" (2 stages reused from earlier runs; their training took 1234.5 s)"`` or ""."""
+    reused = [r for r in records if r.reused and getattr(r, "trained_seconds", None) is not None]
+    if not reused:
+        return ""
+    total = sum(float(r.trained_seconds or 0.0) for r in reused)
+    what = "1 stage" if len(reused) == 1 else f"{len(reused)} stages"
+    return f" ({what} reused from earlier runs; their training took {total:.1f} s)"
+
+
 def render_report(
     resolved: "ResolvedSpec", records: list["StageRecord"], wall_seconds: float, out_dir: Path | None = None, plot_note: str | None = None
 ) -> str:
@@ -44,18 +54,22 @@ def render_report(
     lines += [
         f"- spec: `{resolved.source}` (resolved copy: `spec.yaml`)",
         f"- humanoid `{spec.humanoid.name}`, motions `{spec.motions.name}`, simulator `{spec.simulator.name}`, seed {spec.seed}",
-        f"- wall-clock: {wall_seconds:.1f} s",
+        f"- wall-clock of this run: {wall_seconds:.1f} s" + _reused_note(records),
         "",
         "## Stages",
         "",
-        "| stage | component | trainer | artifact | reused | seconds |",
-        "|---|---|---|---|---|---|",
+        "| stage | component | trainer | artifact | reused | seconds (this run) | training time |",
+        "|---|---|---|---|---|---|---|",
     ]
     for r in records:
         section = getattr(spec, r.stage)
         component = getattr(section, "name", "-")
         trainer = section.trainer.name if getattr(section, "trainer", None) is not None else "-"
-        lines.append(f"| {r.stage} | {component} | {trainer} | `{r.workdir.name}` | {'yes' if r.reused else 'no'} | {r.seconds:.1f} |")
+        trained = r.trained_seconds if r.reused else (r.seconds if trainer != "-" else None)
+        shown = f"{trained:.1f} s" if trained is not None else "-"
+        lines.append(
+            f"| {r.stage} | {component} | {trainer} | `{r.workdir.name}` | {'yes' if r.reused else 'no'} | {r.seconds:.1f} | {shown} |"
+        )
     for r in records:
         if not r.result.metrics:
             continue

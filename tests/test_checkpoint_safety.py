@@ -129,3 +129,28 @@ def test_every_committed_checkpoint_loads_safely():
     assert files
     for f in files:
         assert isinstance(load_checkpoint(f), dict)
+
+
+def test_committed_checkpoints_name_their_dependencies_by_relative_path():
+    """No committed checkpoint embeds a path of the machine it was trained on; a latent's teacher
+    resolves next to it (issue 25: pulse_amp named /work/train/...)."""
+    import yaml
+
+    from mocap.evaluation import load_evaluation_target
+    from mocap.plugins import get_plugins
+
+    for f in sorted(REPO.glob("checkpoints/*/*.pt")):
+        doc = yaml.safe_load(load_checkpoint(f).get("spec") or "{}") or {}
+        for stage in ("imitator", "latent", "task"):
+            ck = (doc.get(stage) or {}).get("checkpoint")
+            assert ck is None or not Path(ck).is_absolute(), (f, ck)
+    target = load_evaluation_target(REPO / "checkpoints/pulse_amp_v2/latent.pt", get_plugins())
+    assert Path(target.imitator_checkpoint).resolve() == (REPO / "checkpoints/imitator_amp_v2/policy.pt").resolve()
+
+
+def test_export_rewrites_the_copied_checkpoints_embedded_paths(tmp_path):
+    from mocap.export import relative_spec_text
+
+    text = "imitator:\n  name: phc\n  checkpoint: /abs/x/checkpoints/imitator/policy.pt\nlatent:\n  name: pulse\n"
+    out = relative_spec_text(text, tmp_path / "dest", root_map=("/abs/x/", str(tmp_path) + "/"))
+    assert "checkpoint: ../checkpoints/imitator/policy.pt" in out

@@ -82,3 +82,16 @@ def test_unknown_fields_get_a_suggestion_and_the_allowed_fields(override, expect
     assert main(["validate", str(spec), "--set", override]) == 2
     err = capsys.readouterr().err
     assert "unknown field" in err and expect in err and "allowed fields:" in err
+
+
+def test_a_latent_with_its_own_tracker_is_evaluated_as_such():
+    """`mocap eval runs/quickstart/latent-vmp` (the quickstart's own "next:" line) raised ValueError: a VMP
+    latent file is not a distilled latent, so the evaluator now drives its own tracker."""
+    from pathlib import Path
+
+    from mocap.evaluation import _is_distilled
+
+    root = Path(__file__).resolve().parents[1] / "checkpoints"
+    assert not _is_distilled(root / "vmp_amp_v2" / "latent.pt")
+    assert _is_distilled(root / "pulse_amp_v2" / "latent.pt")
+    assert _is_distilled(root / "hybrid_rvq_amp" / "latent.pt")

@@ -125,3 +125,20 @@ def test_rows_of_a_stage_attempt_killed_before_its_checkpoint_are_not_kept(tmp_p
     steps = [(r["stage"], r["step"]) for r in rows]
     assert steps == [("imitator", 1), ("imitator", 2), ("imitator", 3), ("latent", 1), ("latent", 2)]
     assert all(r["value"] != 99.0 for r in rows)
+
+
+def test_rerunning_a_finished_spec_keeps_the_original_training_times(tmp_path: Path):
+    """A rerun that reuses every stage reports their original training time, not 0.0 s."""
+    import re
+
+    out = tmp_path / "runs" / "a"
+    first = run_pipeline(resolve(), PSET, out, console=quiet())
+    trained = {r.stage: r.seconds for r in first}
+    again = run_pipeline(resolve(), PSET, out, console=quiet())
+    assert all(r.reused for r in again)
+    for r in again:
+        assert r.trained_seconds == pytest.approx(trained[r.stage], abs=0.02)
+    report = (out / "report.md").read_text()
+    assert re.search(r"2 stages reused from earlier runs; their training took \d+\.\d s", report)
+    stages = json.loads((out / "stages.json").read_text())
+    assert all(s["trained_seconds"] is not None for s in stages)
