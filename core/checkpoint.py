@@ -303,6 +303,20 @@ def check_format(path: Path | str, data: dict[str, Any], expect: str | tuple[str
     raise CheckpointError(f"{path}: not a {what} file (format {got!r}, expected {listed})")
 
 
+def training_status(data: dict[str, Any]) -> str | None:
+    """``"in progress: 12,288 of 22,000,000 env steps (0.1%)"`` for a trainer checkpoint saved before
+    the end of its budget (``finished`` False), None for a finished one or any other file."""
+    if not isinstance(data, dict) or "finished" not in data or bool(data.get("finished")):
+        return None
+    params = data.get("params") if isinstance(data.get("params"), dict) else {}
+    done = data.get("env_steps")
+    total = params.get("total_env_steps") if isinstance(params, dict) else None
+    if isinstance(done, (int, float)) and isinstance(total, (int, float)) and total > 0:
+        return f"in progress: {int(done):,} of {int(total):,} env steps ({100.0 * done / total:.1f}%)"
+    step = data.get("iteration", data.get("step"))
+    return f"in progress (saved at step {int(step):,})" if isinstance(step, (int, float)) else "in progress"
+
+
 def embedded_humanoid(data: dict[str, Any]) -> str | None:
     """The humanoid named by the spec embedded in a checkpoint (None without one)."""
     import yaml
@@ -333,5 +347,6 @@ __all__ = [
     "package_versions",
     "save_checkpoint",
     "split_format",
+    "training_status",
     "written_by",
 ]

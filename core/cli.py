@@ -184,7 +184,10 @@ def cmd_run(
         except PipelineInterrupted as exc:
             err_console.print(f"[yellow]interrupted[/] during stage {exc.args[0]!r}; run the same command again to resume.")
             raise typer.Exit(EXIT_INTERRUPTED) from None
-        comparison([c for c, _ in cells], out_dir)
+        data = comparison([c for c, _ in cells], out_dir)
+        from mocap.matrix import render as render_comparison
+
+        console.print(render_comparison(data["groups"]), highlight=False, markup=False)
         failed = [name for name, s in status.items() if s != "done"]
         console.print(f"[bold green]done[/]: {len(cells) - len(failed)}/{len(cells)} cells; comparison: {out_dir / 'comparison.md'}", highlight=False)
         console.print(
@@ -213,6 +216,10 @@ def cmd_run(
         )
         raise typer.Exit(EXIT_INTERRUPTED) from None
     console.print(f"[bold green]done[/]: {len(records)} stage(s); report: {out_dir / 'report.md'}", highlight=False)
+    from mocap.report import headline
+
+    for line in headline(records):
+        console.print(f"  {line}", highlight=False)
     if resolved.spec.imitator is not None:
         console.print(f"next: `mocap eval {out_dir}` prints the per-clip imitation table; more specs to run are in specs/", highlight=False)
 

@@ -471,6 +471,7 @@ def _from_file(target: Path, plugins: Any) -> EvalTarget:
         return _check(EvalTarget(resolved, _stage_checkpoint(resolved.spec, "imitator"), _stage_checkpoint(resolved.spec, "latent")), target)
     data = load_checkpoint(target)  # CheckpointError (missing, corrupt, truncated): one clear line
     _check_known_format(target, data)
+    _warn_unfinished(target, data)
     spec_yaml = data.get("spec") if isinstance(data, dict) else None
     if not spec_yaml:
         raise UserError(f"{target}: the checkpoint carries no spec; evaluate its run directory instead")
@@ -484,6 +485,21 @@ def _from_file(target: Path, plugins: Any) -> EvalTarget:
         teacher = _stage_checkpoint(resolved.spec, "imitator")
         return _check(EvalTarget(resolved, teacher, target), target)
     return _check(EvalTarget(resolved, target), target)
+
+
+def _warn_unfinished(path: Path, data: dict[str, Any]) -> None:
+    """One ``warning:`` line when a trainer checkpoint was saved before the end of its budget (eval,
+    generate, render and export all load targets through here)."""
+    from rich.console import Console
+
+    from mocap.checkpoint import training_status
+
+    status = training_status(data)
+    if status is not None:
+        Console(stderr=True, soft_wrap=True).print(
+            f"[yellow]warning:[/] {path} is a training checkpoint still {status}; the numbers describe an unfinished policy",
+            highlight=False,
+        )
 
 
 def _check_known_format(path: Path, data: dict[str, Any]) -> None:

@@ -34,6 +34,23 @@ def _fmt(value: object) -> str:
     return str(value)
 
 
+#: metric names printed at the end of a run, in this order (those a run has)
+HEADLINE = ("succeeded", "success_rate", "mpjpe_g_succ", "mpjpe_g", "fall_rate", "time_to_fall_s", "normalized_return", "speed_error")
+
+
+def headline(records: list["StageRecord"], limit: int = 6) -> list[str]:
+    """The run's headline numbers as ``"eval: MPJPE-g (tracked) (mm) 87"`` lines (at most ``limit``)."""
+    from mocap.metric_display import metric_label
+
+    out: list[str] = []
+    for name in HEADLINE:
+        for r in records:
+            for key, value in (r.result.metrics or {}).items():
+                if key.split("/")[-1] == name and isinstance(value, (int, float)):
+                    out.append(f"{r.stage}: {metric_label(key)} {value:.4g}")
+    return out[:limit]
+
+
 def _reused_note(records: list["StageRecord"]) -> str:
     """``" (2 stages reused from earlier runs; their training took 1234.5 s)"`` or ""."""
     reused = [r for r in records if r.reused and getattr(r, "trained_seconds", None) is not None]

@@ -95,3 +95,27 @@ def test_a_latent_with_its_own_tracker_is_evaluated_as_such():
     assert not _is_distilled(root / "vmp_amp_v2" / "latent.pt")
     assert _is_distilled(root / "pulse_amp_v2" / "latent.pt")
     assert _is_distilled(root / "hybrid_rvq_amp" / "latent.pt")
+
+
+def test_an_unfinished_training_checkpoint_is_named_as_such():
+    from mocap.checkpoint import training_status
+
+    assert training_status({"finished": True, "env_steps": 10}) is None
+    assert training_status({"format": "x"}) is None
+    text = training_status({"finished": False, "env_steps": 40_960, "params": {"total_env_steps": 22_000_000}})
+    assert text == "in progress: 40,960 of 22,000,000 env steps (0.2%)"
+    assert training_status({"finished": False, "step": 5, "params": {}}) == "in progress (saved at step 5)"
+
+
+def test_a_run_ends_with_its_headline_numbers():
+    from pathlib import Path
+
+    from mocap.interfaces import StageResult
+    from mocap.pipeline import StageRecord
+    from mocap.report import headline
+
+    records = [
+        StageRecord("imitator", "k1", Path("a"), StageResult(checkpoint=None, metrics={"episode/return": 3.0}), True, 0.0),
+        StageRecord("eval", "k2", Path("b"), StageResult(checkpoint=None, metrics={"mpjpe_g_succ": 87.04, "succeeded": 9.0}), False, 1.0),
+    ]
+    assert headline(records) == ["eval: clips tracked 9", "eval: MPJPE-g (tracked) (mm) 87.04"]
