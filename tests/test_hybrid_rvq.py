@@ -530,3 +530,25 @@ def test_plugin_registers_the_latent_space(amp) -> None:  # type: ignore[no-unty
     assert isinstance(model, HybridLatent)
     assert model.task_action_space == MultiDiscrete((16,))
     assert model.action_dim == amp.num_dofs
+
+
+def test_relative_dead_threshold_scales_with_the_batch() -> None:
+    """'relative': a code is dead below threshold x (batch rows / K), the same fraction of the mean
+    use per code at every batch size; 'absolute' ignores the batch (vector-quantize-pytorch)."""
+    from mocap_hybrid_rvq.quantizers import VectorQuantizer
+
+    rel = VectorQuantizer(4, 1024, dead_threshold=0.5, dead_threshold_mode="relative")
+    assert rel.effective_threshold(512) == pytest.approx(0.25)
+    assert rel.effective_threshold(4096) == pytest.approx(2.0)
+    ab = VectorQuantizer(4, 1024, dead_threshold=2.0)
+    assert ab.effective_threshold(512) == ab.effective_threshold(4096) == 2.0
+    # EMA sizes around the mean use (0.5 at B = 512): absolute 2.0 calls them all dead, relative 0.5 none
+    torch.manual_seed(0)
+    for vq in (ab, rel):
+        vq.initialized.fill_(True)
+        vq.cluster_size.fill_(0.5)
+    x = torch.randn(512, 4)
+    assert int(ab.reset_dead(x).sum()) == 512  # capped at the batch's rows
+    assert int(rel.reset_dead(x).sum()) == 0
+    with pytest.raises(ValueError, match="dead_threshold_mode"):
+        VectorQuantizer(4, 8, dead_threshold_mode="fraction")  # type: ignore[arg-type]

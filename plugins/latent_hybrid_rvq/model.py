@@ -133,6 +133,12 @@ class HybridParams(BaseModel):
     dead_threshold: float = Field(
         2.0, ge=0.0, description="codes with EMA cluster size below this are reset from the batch ([DEFAULT] 2.0; 0 disables)"
     )
+    dead_threshold_mode: Literal["absolute", "relative"] = Field(
+        "absolute",
+        description="'absolute': dead_threshold is an EMA count per batch (vector-quantize-pytorch's threshold_ema_dead_code; "
+        "[P] names no threshold); 'relative': a fraction of the mean use per code, batch rows / codebook size (the same "
+        "meaning at every batch size)",
+    )
     codebook_init: Literal["kmeans", "random"] = Field(
         "kmeans", description="codebook initialization from the first training batch ([DEFAULT] k-means, as SoundStream)"
     )
@@ -289,6 +295,7 @@ class HybridLatent(LatentSpace):
             "decay": params.ema_decay,
             "eps": params.ema_eps,
             "dead_threshold": params.dead_threshold,
+            "dead_threshold_mode": params.dead_threshold_mode,
             "init": params.codebook_init,
             "kmeans_iters": params.kmeans_iters,
         }

@@ -70,6 +70,7 @@ import torch
 from torch import Tensor, nn
 
 CodebookInit = Literal["kmeans", "random"]
+DeadThresholdMode = Literal["absolute", "relative"]
 Commitment = Literal["per_level", "total"]
 
 
@@ -163,6 +164,11 @@ class VectorQuantizer(Quantizer):
         eps: Laplace smoothing ε of the cluster sizes ([DEFAULT] 1e-5).
         dead_threshold: codes whose EMA cluster size falls below this are reset from the batch
             ([DEFAULT] 2.0; 0 disables).
+        dead_threshold_mode: ``"absolute"`` (the threshold is an EMA count of samples per batch,
+            vector-quantize-pytorch's ``threshold_ema_dead_code``) or ``"relative"`` (a fraction of
+            the mean use per code, ``B / K`` for a batch of B rows at this level: the same setting
+            means the same at every batch size; at B = 512, K = 1024 an absolute 2.0 is 4x the mean
+            use, so most codes count as dead every step).
         init: ``kmeans`` ([DEFAULT]) or ``random`` initialization from the first training batch.
         kmeans_iters: Lloyd iterations of the k-means initialization.
     """
@@ -180,10 +186,13 @@ class VectorQuantizer(Quantizer):
         decay: float = 0.99,
         eps: float = 1e-5,
         dead_threshold: float = 2.0,
+        dead_threshold_mode: DeadThresholdMode = "absolute",
         init: CodebookInit = "kmeans",
         kmeans_iters: int = 10,
     ):
         super().__init__()
+        if dead_threshold_mode not in ("absolute", "relative"):
+            raise ValueError(f"dead_threshold_mode must be 'absolute' or 'relative', got {dead_threshold_mode!r}")
         if dim < 1 or codebook_size < 1:
             raise ValueError(f"dim and codebook_size must be >= 1, got {dim}, {codebook_size}")
         if not 0.0 < decay <= 1.0:
@@ -196,6 +205,7 @@ class VectorQuantizer(Quantizer):
         self.decay = float(decay)
         self.eps = float(eps)
         self.dead_threshold = float(dead_threshold)
+        self.dead_threshold_mode = dead_threshold_mode
         self.init = init
         self.kmeans_iters = int(kmeans_iters)
         embed = torch.randn(codebook_size, dim)
@@ -268,7 +278,8 @@ class VectorQuantizer(Quantizer):
         the rest in later steps: filling them all from one small batch would put several copies of
         one row in the codebook, and only one copy could ever be chosen.
         """
-        dead = self.cluster_size < self.dead_threshold
+        threshold = self.effective_threshold(x.shape[0])
+        dead = self.cluster_size < threshold
         n_dead = int(dead.sum())
         if n_dead == 0 or x.shape[0] == 0:
             return torch.zeros_like(dead)
@@ -280,9 +291,15 @@ class VectorQuantizer(Quantizer):
             n_dead = x.shape[0]
         new = _choose_rows(x.detach().to(self.embed.dtype), n_dead)
         self.embed[dead] = new
-        self.cluster_size[dead] = self.dead_threshold
-        self.embed_sum[dead] = new * self.dead_threshold
+        self.cluster_size[dead] = threshold
+        self.embed_sum[dead] = new * threshold
         return dead
+
+    def effective_threshold(self, batch_rows: int) -> float:
+        """The EMA cluster size below which a code is dead, for a batch of ``batch_rows`` rows here."""
+        if self.dead_threshold_mode == "relative":
+            return self.dead_threshold * batch_rows / self.codebook_size
+        return self.dead_threshold
 
     def train_step(self, x: Tensor, indices: Tensor) -> None:
         """EMA update then dead-code reset from the level's inputs ``x`` and their assignments."""
@@ -320,7 +337,7 @@ class VectorQuantizer(Quantizer):
     def extra_repr(self) -> str:
         return (
             f"dim={self.dim}, codebook_size={self.codebook_size}, decay={self.decay}, eps={self.eps}, "
-            f"dead_threshold={self.dead_threshold}, init={self.init!r}"
+            f"dead_threshold={self.dead_threshold} ({self.dead_threshold_mode}), init={self.init!r}"
         )
 
 
@@ -332,7 +349,7 @@ class ResidualVQ(Quantizer):
         dim: code dimension D (the latent dimension).
         num_quantizers: number of levels N ([P] 8).
         codebook_size: codes per level K ([P] 1024; separate codebooks per level).
-        decay, eps, dead_threshold, init, kmeans_iters: per level, see :class:`VectorQuantizer`.
+        decay, eps, dead_threshold, dead_threshold_mode, init, kmeans_iters: per level, see :class:`VectorQuantizer`.
         dropout: quantizer dropout in training ([P] used).
         dropout_per_sample: draw the depth M per sample ([DEFAULT], SoundStream) or once per batch.
         dropout_prob: fraction of samples (or batches) that get a random depth; the others use N
@@ -349,6 +366,7 @@ class ResidualVQ(Quantizer):
         decay: float = 0.99,
         eps: float = 1e-5,
         dead_threshold: float = 2.0,
+        dead_threshold_mode: DeadThresholdMode = "absolute",
         init: CodebookInit = "kmeans",
         kmeans_iters: int = 10,
         dropout: bool = True,
@@ -372,7 +390,14 @@ class ResidualVQ(Quantizer):
         self.commitment = commitment
         self.levels = nn.ModuleList(
             VectorQuantizer(
-                dim, codebook_size, decay=decay, eps=eps, dead_threshold=dead_threshold, init=init, kmeans_iters=kmeans_iters
+                dim,
+                codebook_size,
+                decay=decay,
+                eps=eps,
+                dead_threshold=dead_threshold,
+                dead_threshold_mode=dead_threshold_mode,
+                init=init,
+                kmeans_iters=kmeans_iters,
             )
             for _ in range(num_quantizers)
         )
