@@ -14,7 +14,7 @@ SPECS = sorted((ROOT / "specs").rglob("*.yaml"))
 
 
 def test_there_are_specs():
-    assert {p.name for p in SPECS} >= {"quickstart.yaml", "amp_bundled.yaml", "phc_plus_smpl.yaml"}
+    assert {p.name for p in SPECS} >= {"quickstart.yaml", "amp_bundled.yaml", "phc_smpl.yaml"}
 
 
 @pytest.mark.parametrize("path", SPECS, ids=[str(p.relative_to(ROOT)) for p in SPECS])
