@@ -88,6 +88,7 @@ from mocap.latent_imitator import LatentImitator, PDTargetTeacher, observations_
 from mocap.motion.library import MotionLibrary
 from mocap.state import HUMANOID_FIELDS, HumanoidState, MotionFrames, Observations, SimState
 from mocap.bounds import EnvCount, LearningRate, ThreadCount
+from mocap.fail_states import FailStateParams, fail_starts, generate_fall_states
 
 CHECKPOINT_FORMAT = "mocap.distill/1"
 CHECKPOINT_NAME = "distill.pt"
@@ -131,6 +132,12 @@ class DistillParams(BaseModel):
         0.5, gt=0, description="terminate when the mean body-position error exceeds this, m ([P] success criterion 0.5; PHC+ training [CODE] 0.25 on any body)"
     )
     termination_grace: int = Field(0, ge=0, description="steps after a reset that are never checked for termination")
+    fail_states: FailStateParams | None = Field(
+        None,
+        description="fallen-state starts and bonus recovery episodes during distillation (mocap.fail_states), so the "
+        "student (and PULSE's prior) sees get-up states: [CODE] PULSE distills with fallInitProb 0.1 and "
+        "recoveryEpisodeProb 0.3 (fall_init_prob, recovery_episode_prob); [P] does not mention them; None: off",
+    )
     episode_steps: int = Field(300, ge=1, description="time limit in control steps ([CODE] 300 = 10 s at 30 Hz)")
     hard_negative: bool = Field(True, description="clip sampling weights follow per-clip failure counts (PHC+ soft mining)")
     hard_negative_floor: float = Field(0.2, ge=0, le=1, description="share of sampling mass kept on the base weights ([CODE] 0)")
@@ -227,6 +234,11 @@ class DistillEpisodes:
         self._durations = lib.durations.to(dev, torch.float64)
         self._loops = lib.loops.to(dev)
         self.threshold = p.termination_threshold
+        self.recovery_left = torch.zeros(N, dtype=torch.long, device=dev)
+        fs = p.fail_states
+        self._fall_pool: HumanoidState | None = None
+        if fs is not None and fs.fall_init_prob > 0:
+            self._fall_pool = generate_fall_states(self.sim, lib.skeleton, fs.pool_size or N, fs, self.gen)
 
     # ----------------------------------------------------------------------------- resets
     def reset_envs(self, ids: Tensor) -> None:
@@ -241,7 +253,13 @@ class DistillEpisodes:
         self.clip_ids[ids] = clips
         self.start_time[ids] = t0
         self.progress[ids] = 0
-        self.sim.reset(ids, self.library.frames(clips, t0))
+        start: HumanoidState = self.library.frames(clips, t0)
+        self.recovery_left[ids] = 0
+        fs = self.params.fail_states
+        if fs is not None and (fs.fall_init_prob > 0 or fs.far_init_prob > 0):
+            start, recovering = fail_starts(start, self._fall_pool, fs, self.gen)
+            self.recovery_left[ids[recovering]] = int(fs.recovery_steps)
+        self.sim.reset(ids, start)
 
     def reset_all(self) -> None:
         self.reset_envs(torch.arange(self.num_envs))
@@ -259,6 +277,15 @@ class DistillEpisodes:
         err = torch.linalg.vector_norm(state.body_pos.double() - ref.body_pos.double(), dim=-1).mean(-1)
         failed = ~(err <= self.threshold) & (self.progress > p.termination_grace)
         unstable = state.unstable.bool() if state.unstable.numel() else torch.zeros_like(failed)
+        fs = p.fail_states
+        if fs is not None:  # a fallen or far start (or a bonus episode) has a window to recover in
+            failed = failed & ~(self.recovery_left > 0)
+            if fs.recovery_episode_prob > 0:  # [CODE] some failures go on as recovery episodes
+                u = torch.rand(self.num_envs, generator=self.gen, dtype=torch.float64).to(failed.device)
+                bonus = failed & ~unstable & (u < fs.recovery_episode_prob)
+                failed = failed & ~bonus
+                self.recovery_left = torch.where(bonus, torch.full_like(self.recovery_left, fs.recovery_steps + 1), self.recovery_left)
+            self.recovery_left = (self.recovery_left - 1).clamp_min(0)
         terminated = failed | unstable
         t_next = self.start_time + (self.progress + 1).to(torch.float64) * self.dt
         clip_over = ~self._loops[self.clip_ids] & (t_next > self._durations[self.clip_ids] + 1e-6)
@@ -308,6 +335,7 @@ class DistillEpisodes:
             "clip_ids": self.clip_ids.cpu().clone(),
             "start_time": self.start_time.cpu().clone(),
             "progress": self.progress.cpu().clone(),
+            "recovery_left": self.recovery_left.cpu().clone(),
             **self.failures.state_dict(),
         }
         if hasattr(self.sim, "get_physics_state"):
@@ -327,6 +355,8 @@ class DistillEpisodes:
         self.clip_ids = state["clip_ids"].to(dev).clone()
         self.start_time = state["start_time"].to(dev).clone()
         self.progress = state["progress"].to(dev).clone()
+        if "recovery_left" in state:
+            self.recovery_left = state["recovery_left"].to(dev).clone()
         self.failures.load_state_dict(state)
         ids = torch.arange(self.num_envs)
         if "physics" in state and hasattr(self.sim, "set_physics_state"):

@@ -315,3 +315,41 @@ def test_distill_without_an_imitator_is_a_clear_error(tmp_path):
     result = invoke(["run", spec, "--out", tmp_path / "runs" / "x"])
     assert result.exit_code == 2 and "Traceback" not in result.output
     assert "needs a teacher" in result.stderr
+
+
+def test_fallen_starts_and_bonus_recovery_episodes_in_distillation(amp, walk):
+    """PULSE's code distills with fallen-state starts and recovery episodes (issue 27 item 6): a
+    fallen start lies low, gets a recovery window in which tracking failures do not end it, and
+    a failure outside the window may go on as a bonus recovery episode."""
+    from mocap.distill import DistillEpisodes
+    from mocap.fail_states import FailStateParams
+
+    lib = MotionLibrary(walk, amp)
+    fs = FailStateParams(fall_init_prob=1.0, recovery_steps=6, settle_steps=30, pool_size=4)
+    ep = DistillEpisodes(DistillParams(num_envs=4, minibatch_envs=4, fail_states=fs), lib, make_sim(amp, 4), seed=0)
+    ep.reset_all()
+    assert bool((ep.recovery_left == 6).all())
+    assert float(ep.sim.state.root_pos[:, 2].max()) < 0.5  # lying on the ground, not standing at the reference
+    zeros = ep.sim.state.dof_pos.clone()
+    for k in range(5):  # far from the reference, but inside the window: no termination
+        state = ep.sim.step(zeros)
+        out = ep.after_step(state, ep.reference_next())
+        assert not bool(out["terminated"].any()), k
+    # bonus episodes: every failure after the window goes on with a fresh window
+    ep2 = DistillEpisodes(
+        DistillParams(num_envs=4, minibatch_envs=4, fail_states=FailStateParams(recovery_episode_prob=1.0, recovery_steps=3)),
+        lib,
+        make_sim(amp, 4),
+        seed=0,
+    )
+    ep2.reset_all()
+    far = ep2.reference_next()
+    far.body_pos += 5.0  # a reference 5 m away: every env fails the 0.5 m criterion
+    out = ep2.after_step(ep2.sim.step(ep2.sim.state.dof_pos.clone()), far)
+    assert not bool(out["terminated"].any()) and bool((ep2.recovery_left == 3).all())
+    # off (the default): the same failure terminates
+    ep3 = DistillEpisodes(DistillParams(num_envs=4, minibatch_envs=4), lib, make_sim(amp, 4), seed=0)
+    ep3.reset_all()
+    far = ep3.reference_next()
+    far.body_pos += 5.0
+    assert bool(ep3.after_step(ep3.sim.step(ep3.sim.state.dof_pos.clone()), far)["terminated"].all())

@@ -58,19 +58,20 @@ optimizer, buffers and generator, and the windows are part of :meth:`ImitationEn
 
 from __future__ import annotations
 
-import fnmatch
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Callable, Literal
 
 import numpy as np
 import torch
 from torch import Tensor
 
+from mocap.fail_states import fail_starts, generate_fall_states
 from mocap.hard_negatives import FailureTracker
 from mocap.hard_negatives import failure_weights as hard_negative_weights
 from mocap.interfaces import Box, Imitator, Simulator
 from mocap.motion.library import MotionLibrary
+from mocap.pd_actions import pd_offset_scale
 from mocap.observations import imitation_goal_dim, proprioception_and_goal, proprioception_dim
 from mocap.rl.env import StepResult
 from mocap.skeleton import Skeleton
@@ -122,33 +123,6 @@ class PHCObservation:
 
 
 # ------------------------------------------------------------------------------------ actions
-def pd_offset_scale(skeleton: Skeleton, overrides: dict[str, float] | None = None) -> tuple[Tensor, Tensor]:
-    """(D,) offset and scale of PHC's absolute action mapping ``q = offset + scale * a``.
-
-    * a joint of 2 or more hinges (PHC's 3-DoF joints): ``scale = min(1.2 max(|lo|, |hi|), pi)``
-      over the joint's hinges, shared by them, ``offset = 0`` (PHC ``_build_pd_action_offset_scale``);
-    * a single hinge (AMP/ASE lineage; PHC's SMPL has none): the range widened to
-      ``mid -+ 0.7 (hi - lo)``, i.e. ``offset = mid``, ``scale = 0.7 (hi - lo)``;
-    * ``overrides``: DoF-name glob -> scale (PHC: the knee's y hinge gets 5 rad, ``*Knee_y``).
-    """
-    offset, scale = [], []
-    for body in skeleton.bodies[1:]:
-        hs = body.joint.hinges
-        if len(hs) == 1:
-            lo, hi = hs[0].range
-            offset.append((lo + hi) / 2.0)
-            scale.append(0.7 * (hi - lo))
-        elif hs:
-            s = min(1.2 * max(max(abs(h.range[0]), abs(h.range[1])) for h in hs), math.pi)
-            offset.extend([0.0] * len(hs))
-            scale.extend([s] * len(hs))
-    for pattern, value in (overrides or {}).items():
-        for i, name in enumerate(skeleton.dof_names):
-            if fnmatch.fnmatchcase(name, pattern):
-                scale[i] = float(value)
-    return torch.tensor(offset, dtype=torch.float64), torch.tensor(scale, dtype=torch.float64)
-
-
 @dataclass(frozen=True)
 class ActionMap:
     """Policy action (N, D) -> PD targets (N, D), rad.
@@ -302,8 +276,6 @@ class ImitationEnv:
         self._fall_pool: HumanoidState | None = None
         fs = p.fail_states
         if fs is not None and fs.fall_init_prob > 0:
-            from mocap_phc.recovery import generate_fall_states
-
             self._fall_pool = generate_fall_states(self.sim, skeleton, fs.pool_size or N, fs, self._gen)
 
         self.amp_obs: AMPObservation | None = None
@@ -395,34 +367,10 @@ class ImitationEnv:
             self._amp_fill(ids, self.sim.state.index(ids), clips, t0)
 
     def _fail_starts(self, ids: Tensor, start: MotionFrames, fs: Any) -> HumanoidState:
-        """Replace some RSI starts by fallen states (at the reference root's xy) or far ones."""
-        from mocap_phc.recovery import moved
-
-        n = int(ids.numel())
-        u = torch.rand(n, generator=self._gen, dtype=torch.float64)
-        v = torch.rand(n, generator=self._gen, dtype=torch.float64)
-        fall = (u < fs.fall_init_prob) if self._fall_pool is not None else torch.zeros(n, dtype=torch.bool)
-        far = ~fall & (v < fs.far_init_prob)
-        state: HumanoidState = HumanoidState(**{f.name: getattr(start, f.name).clone() for f in fields(HumanoidState)})
-        if bool(far.any()):
-            k = int(far.sum())
-            lo, hi = fs.far_init_range
-            radius = lo + (hi - lo) * torch.rand(k, generator=self._gen, dtype=torch.float64)
-            angle = 2 * math.pi * torch.rand(k, generator=self._gen, dtype=torch.float64)
-            shift = torch.stack([radius * torch.cos(angle), radius * torch.sin(angle), torch.zeros(k, dtype=torch.float64)], -1)
-            sub = moved(state.index(far.nonzero().squeeze(-1)), shift.to(state.root_pos))
-            _assign_rows(state, far.nonzero().squeeze(-1), sub)
-        if bool(fall.any()):
-            assert self._fall_pool is not None
-            k = int(fall.sum())
-            pick = torch.randint(0, self._fall_pool.num_envs, (k,), generator=self._gen)
-            pool = self._fall_pool.index(pick)
-            rows = fall.nonzero().squeeze(-1)
-            shift = torch.zeros(k, 3, dtype=state.root_pos.dtype)
-            shift[:, :2] = state.root_pos[rows, :2].cpu() - pool.root_pos[:, :2].to(shift)
-            pool = moved(HumanoidState(**{f.name: getattr(pool, f.name).to(state.root_pos.device, state.root_pos.dtype) for f in fields(HumanoidState)}), shift.to(state.root_pos.device))
-            _assign_rows(state, rows, pool)
-        self.recovery_left[ids[fall | far]] = int(fs.recovery_steps)
+        """Replace some RSI starts by fallen states (at the reference root's xy) or far ones
+        (:func:`mocap.fail_states.fail_starts`); those envs get a recovery window."""
+        state, recovering = fail_starts(start, self._fall_pool, fs, self._gen)
+        self.recovery_left[ids[recovering]] = int(fs.recovery_steps)
         return state
 
     def _amp_fill(self, ids: Tensor, state: HumanoidState, clips: Tensor, t0: Tensor) -> None:
