@@ -85,7 +85,7 @@ from mocap.hard_negatives import FailureTracker, failure_weights
 from mocap.pipeline import StageFailed
 from mocap.progress import IterationProgress
 from mocap.latent_imitator import LatentImitator, PDTargetTeacher, observations_to
-from mocap.motion.library import MotionLibrary
+from mocap.motion.library import MotionLibrary, grid_start_times
 from mocap.state import HUMANOID_FIELDS, HumanoidState, MotionFrames, Observations, SimState
 from mocap.bounds import EnvCount, LearningRate, ThreadCount
 from mocap.fail_states import FailStateParams, fail_starts, generate_fall_states
@@ -139,6 +139,11 @@ class DistillParams(BaseModel):
         "recoveryEpisodeProb 0.3 (fall_init_prob, recovery_episode_prob); [P] does not mention them; None: off",
     )
     episode_steps: int = Field(300, ge=1, description="time limit in control steps ([CODE] 300 = 10 s at 30 Hz)")
+    control_grid: bool = Field(
+        True,
+        description="start times on the control-rate grid and the reference read from a table precomputed at those times "
+        "(MotionLibrary.use_control_grid, as the phc env); False: continuous start times, interpolated every step",
+    )
     hard_negative: bool = Field(True, description="clip sampling weights follow per-clip failure counts (PHC+ soft mining)")
     hard_negative_floor: float = Field(0.2, ge=0, le=1, description="share of sampling mass kept on the base weights ([CODE] 0)")
     hard_negative_decay: float = Field(1.0, gt=0, le=1, description="failure counts are multiplied by this before each addition ([CODE] 1)")
@@ -235,6 +240,8 @@ class DistillEpisodes:
         self._loops = lib.loops.to(dev)
         self.threshold = p.termination_threshold
         self.recovery_left = torch.zeros(N, dtype=torch.long, device=dev)
+        if p.control_grid:
+            lib.use_control_grid(self.dt, p.episode_steps + 2)
         fs = p.fail_states
         self._fall_pool: HumanoidState | None = None
         if fs is not None and fs.fall_init_prob > 0:
@@ -250,6 +257,8 @@ class DistillEpisodes:
         dur = self._durations[clips]
         latest = torch.where(self._loops[clips], dur, (dur - self.dt).clamp_min(0.0))
         t0 = torch.minimum(t0, latest)
+        if self.params.control_grid:
+            t0 = grid_start_times(t0, dur, self._loops[clips], self.dt)
         self.clip_ids[ids] = clips
         self.start_time[ids] = t0
         self.progress[ids] = 0

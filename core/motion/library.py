@@ -473,6 +473,15 @@ class MotionLibrary:
         return body_pos, body_rot, _rotate_z(lin_vel, turn), _rotate_z(ang_vel, turn)
 
 
+def grid_start_times(t0: Tensor, durations: Tensor, loops: Tensor, dt: float) -> Tensor:
+    """Episode start times moved to the control grid: the grid time ``j dt`` at or before ``t0``
+    (looping clips: inside the period ``[0, duration)``), so that every later step of the episode
+    is a grid time (a :class:`ControlGrid` lookup)."""
+    j = torch.floor(t0 / dt + 1e-9)
+    j = torch.where(loops & (j * dt >= durations - 1e-9), (j - 1).clamp_min(0), j)
+    return j * dt
+
+
 #: MotionFrames fields a control grid stores (times: the wrapped clip time)
 GRID_FIELDS: tuple[str, ...] = (
     "root_pos",
@@ -544,4 +553,4 @@ class ControlGrid:
         return MotionFrames(**out, clip_ids=clip_ids)
 
 
-__all__ = ["ClipInfo", "ControlGrid", "MotionLibrary"]
+__all__ = ["ClipInfo", "ControlGrid", "MotionLibrary", "grid_start_times"]

@@ -70,7 +70,7 @@ from mocap.fail_states import fail_starts, generate_fall_states
 from mocap.hard_negatives import FailureTracker
 from mocap.hard_negatives import failure_weights as hard_negative_weights
 from mocap.interfaces import Box, Imitator, Simulator
-from mocap.motion.library import MotionLibrary
+from mocap.motion.library import MotionLibrary, grid_start_times
 from mocap.pd_actions import pd_offset_scale
 from mocap.observations import imitation_goal_dim, proprioception_and_goal, proprioception_dim
 from mocap.rl.env import StepResult
@@ -346,9 +346,7 @@ class ImitationEnv:
         latest = torch.where(self._loops[clips], dur, (dur - self.dt).clamp_min(0.0))
         t0 = torch.minimum(t0, latest)
         if self.params.control_grid:  # the grid time at or before t0 (looping clips: within the period)
-            j = torch.floor(t0 / self.dt + 1e-9)
-            j = torch.where(self._loops[clips] & (j * self.dt >= dur - 1e-9), (j - 1).clamp_min(0), j)
-            t0 = j * self.dt
+            t0 = grid_start_times(t0, dur, self._loops[clips], self.dt)
         self.clip_ids[ids] = clips
         self.start_time[ids] = t0
         self.progress[ids] = 0
