@@ -319,6 +319,21 @@ def cmd_checkpoint_convert(
     console.print(f"wrote {dst} (loads without running code)", highlight=False)
 
 
+def cmd_switches(
+    out: Annotated[Optional[Path], typer.Option("--out", "-o", help="write to this file instead of stdout")] = None,
+    all_packages: Annotated[bool, typer.Option("--all", help="also third-party plugins' components")] = False,
+) -> None:
+    """Print every paper / official-code switch of the installed components and its default (Markdown)."""
+    from mocap.switches import render
+
+    text = render(_plugins(), None if all_packages else {"mocap"})
+    if out is None:
+        sys.stdout.write(text)
+    else:
+        write_user_file(out, text, "--out")
+        console.print(f"wrote {out}")
+
+
 def build_app(pset: PluginSet | None = None) -> typer.Typer:
     """The root app with the core commands and every plugin's commands."""
     app = typer.Typer(
@@ -332,6 +347,7 @@ def build_app(pset: PluginSet | None = None) -> typer.Typer:
     app.command("validate")(cmd_validate)
     app.command("schema")(cmd_schema)
     app.command("plugins")(cmd_plugins)
+    app.command("switches")(cmd_switches)
     checkpoint_app = typer.Typer(name="checkpoint", help="Checkpoint files: convert older ones to the safe format.", no_args_is_help=True)
     checkpoint_app.command("convert")(cmd_checkpoint_convert)
     app.add_typer(checkpoint_app)

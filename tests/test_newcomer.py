@@ -119,3 +119,15 @@ def test_a_run_ends_with_its_headline_numbers():
         StageRecord("eval", "k2", Path("b"), StageResult(checkpoint=None, metrics={"mpjpe_g_succ": 87.04, "succeeded": 9.0}), False, 1.0),
     ]
     assert headline(records) == ["eval: clips tracked 9", "eval: MPJPE-g (tracked) (mm) 87.04"]
+
+
+def test_docs_switches_table_is_current():
+    """docs/switches.md is `mocap switches` of the built-in components (paper / code / default per switch)."""
+    from pathlib import Path
+
+    from mocap.plugins import get_plugins
+    from mocap.switches import render
+
+    committed = (Path(__file__).resolve().parents[1] / "docs" / "switches.md").read_text()
+    assert render(get_plugins(), {"mocap"}) == committed, "regenerate: mocap switches --out docs/switches.md"
+    assert "`reward_form`" in committed and "`dead_threshold_mode`" in committed and "`fail_states`" in committed
