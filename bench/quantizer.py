@@ -1,4 +1,4 @@
-"""Our :class:`~mocap_hybrid_rvq.quantizers.ResidualVQ` vs ``vector_quantize_pytorch.ResidualVQ``
+"""Our :class:`~mocap.quantizers.ResidualVQ` vs ``vector_quantize_pytorch.ResidualVQ``
 at the same configuration, measured in one run.
 
 Configuration (Hybrid-RVQ paper, digest hybrid_rvq.md §3.5): N = 8 codebooks × K = 1024 codes,
@@ -39,7 +39,7 @@ from pathlib import Path
 from typing import Any
 
 import torch
-from mocap_hybrid_rvq.quantizers import ResidualVQ
+from mocap.quantizers import ResidualVQ
 from torch import Tensor
 
 RESULTS = Path(__file__).parent / "results" / "quantizer.json"

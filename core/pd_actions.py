@@ -1,15 +1,18 @@
-"""PHC's absolute PD-action mapping ``q = offset + scale * a`` of a skeleton (PHC code
-``_build_pd_action_offset_scale``), shared by the imitator's action map and the fallen-state
-generator (:mod:`mocap.fail_states`)."""
+"""Policy actions to PD targets: PHC's absolute mapping ``q = offset + scale * a`` of a skeleton
+(PHC code ``_build_pd_action_offset_scale``) and the residual mapping ``q = q^ + a``, shared by the
+PHC imitator, VMP's tracker and the fallen-state generator (:mod:`mocap.fail_states`)."""
 
 from __future__ import annotations
 
 import fnmatch
 import math
+from dataclasses import dataclass
+from typing import Literal
 
 import torch
 from torch import Tensor
 
+from mocap.interfaces import Box
 from mocap.skeleton import Skeleton
 
 
@@ -40,4 +43,43 @@ def pd_offset_scale(skeleton: Skeleton, overrides: dict[str, float] | None = Non
     return torch.tensor(offset, dtype=torch.float64), torch.tensor(scale, dtype=torch.float64)
 
 
-__all__ = ["pd_offset_scale"]
+@dataclass(frozen=True)
+class ActionMap:
+    """Policy action (N, D) -> PD targets (N, D), rad.
+
+    * ``"absolute"`` (PHC): ``q = offset + scale * a`` (:func:`pd_offset_scale`);
+    * ``"residual"`` (UHC/RFC-style, FEASIBILITY's faster-learning choice): ``q = q^_{t+1} + a``,
+      the next reference pose plus the action.
+
+    ``clip`` (optional) clamps ``a`` to ``[-clip, clip]`` first.
+    """
+
+    mode: Literal["absolute", "residual"]
+    offset: Tensor
+    scale: Tensor
+    clip: float | None = None
+
+    @classmethod
+    def for_skeleton(
+        cls, skeleton: Skeleton, mode: Literal["absolute", "residual"], clip: float | None = None, overrides: dict[str, float] | None = None
+    ) -> "ActionMap":
+        if mode not in ("absolute", "residual"):
+            raise ValueError(f"unknown action mode {mode!r}; choose 'absolute' or 'residual'")
+        offset, scale = pd_offset_scale(skeleton, overrides)
+        return cls(mode, offset, scale, clip)
+
+    @property
+    def space(self) -> Box:
+        c = math.inf if self.clip is None else float(self.clip)
+        return Box((int(self.offset.numel()),), -c, c)
+
+    def __call__(self, actions: Tensor, ref_dof_pos: Tensor | None) -> Tensor:
+        a = actions if self.clip is None else actions.clamp(-self.clip, self.clip)
+        if self.mode == "absolute":
+            return self.offset.to(a) + self.scale.to(a) * a
+        if ref_dof_pos is None:
+            raise ValueError("residual actions need the next reference's DoF angles")
+        return ref_dof_pos.to(a) + a
+
+
+__all__ = ["ActionMap", "pd_offset_scale"]

@@ -25,7 +25,7 @@ from mocap_hybrid_rvq.model import (
     save_hybrid,
     temporal_reg,
 )
-from mocap_hybrid_rvq.quantizers import ResidualVQ, VectorQuantizer
+from mocap.quantizers import ResidualVQ, VectorQuantizer
 
 FAST = settings(max_examples=25, deadline=None, derandomize=True)
 P, G, A, D = 5, 4, 3, 4
@@ -535,7 +535,7 @@ def test_plugin_registers_the_latent_space(amp) -> None:  # type: ignore[no-unty
 def test_relative_dead_threshold_scales_with_the_batch() -> None:
     """'relative': a code is dead below threshold x (batch rows / K), the same fraction of the mean
     use per code at every batch size; 'absolute' ignores the batch (vector-quantize-pytorch)."""
-    from mocap_hybrid_rvq.quantizers import VectorQuantizer
+    from mocap.quantizers import VectorQuantizer
 
     rel = VectorQuantizer(4, 1024, dead_threshold=0.5, dead_threshold_mode="relative")
     assert rel.effective_threshold(512) == pytest.approx(0.25)

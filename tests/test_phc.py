@@ -24,7 +24,7 @@ from mocap.observations import ROT_GOAL_COLUMNS, imitation_goal_rot
 from mocap.state import HumanoidState, SimState
 from mocap_phc.env import ActionMap, ImitationEnv, hard_negative_weights, pd_offset_scale
 from mocap_phc.imitator import PHCImitator, PHCParams, make_phc
-from mocap_phc.rewards import ImitationReward, energy_penalty, exp_term, imitation_errors
+from mocap.imitation_rewards import ImitationReward, energy_penalty, exp_term, imitation_errors
 from mocap_phc.termination import Termination, checked_mask, imitation_failed
 
 F64 = torch.float64

@@ -26,7 +26,7 @@ from mocap.interfaces import Box, MultiDiscrete, StageResult
 from mocap.rl.ppo import compute_gae
 from mocap.runlog import MetricsLogger
 from mocap.state import Observations
-from mocap_hybrid_rvq.quantizers import VectorQuantizer
+from mocap.quantizers import VectorQuantizer
 from mocap_pulse.latent import PulseLatent, PulseParams, make_pulse
 from mocap_pulse.rl_term import (
     RL_KEYS,
@@ -435,7 +435,7 @@ def test_a_gradient_step_on_the_rl_term_moves_log_prob_with_the_advantage(policy
 def test_rl_reward_is_the_phc_imitation_reward(amp):
     from mocap.motion.deepmimic import DeepMimicParams, DeepMimicSource
     from mocap.motion.library import MotionLibrary
-    from mocap_phc.rewards import ImitationReward
+    from mocap.imitation_rewards import ImitationReward
 
     lib = MotionLibrary(DeepMimicSource(DeepMimicParams(clips=["walk"])).load(amp), amp)
     ref = lib.frames(torch.zeros(3, dtype=torch.long), torch.tensor([0.1, 0.2, 0.3]))

@@ -194,7 +194,7 @@ def test_energy_penalty_is_weighted_while_recovering(amp, walk, weight):  # noqa
     env.reset()
     for _ in range(5):  # past the code form's energy warm-up
         res = env.step(0.3 * torch.ones(4, amp.num_dofs))
-    from mocap_phc.rewards import energy_penalty
+    from mocap.imitation_rewards import energy_penalty
 
     st_ = env.sim.state
     raw = energy_penalty(st_.dof_force, st_.dof_vel, env.params.energy_form, env.params.energy_coef, env.progress)

@@ -9,7 +9,7 @@ Episode (PHC Sec. 3, digest §3.2-3.6):
   state there (root pose and velocities, DoF angles and velocities).
 * **Step** ``t -> t+1``: the observation at ``t`` holds the reference at ``t+1``; the action is
   mapped to PD targets (:class:`ActionMap`), the simulator advances one control step, and the
-  reward (:mod:`mocap_phc.rewards`) and termination (:mod:`mocap_phc.termination`) compare the new
+  reward (:mod:`mocap.imitation_rewards`) and termination (:mod:`mocap_phc.termination`) compare the new
   state with that same ``t+1`` reference.
 * **End**: *terminated* on tracking failure, fall (optional) or numerical instability (no
   bootstrap); *truncated* after ``episode_steps`` steps (300 = 10 s at 30 Hz) or when a
@@ -58,7 +58,6 @@ optimizer, buffers and generator, and the windows are part of :meth:`ImitationEn
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Callable, Literal
 
@@ -69,15 +68,15 @@ from torch import Tensor
 from mocap.fail_states import fail_starts, generate_fall_states
 from mocap.hard_negatives import FailureTracker
 from mocap.hard_negatives import failure_weights as hard_negative_weights
-from mocap.interfaces import Box, Imitator, Simulator
+from mocap.interfaces import Imitator, Simulator
 from mocap.motion.library import MotionLibrary, grid_start_times
-from mocap.pd_actions import pd_offset_scale
+from mocap.pd_actions import ActionMap, pd_offset_scale
 from mocap.observations import imitation_goal_dim, proprioception_and_goal, proprioception_dim
 from mocap.rl.env import StepResult
 from mocap.skeleton import Skeleton
 from mocap.state import HUMANOID_FIELDS, HumanoidState, MotionFrames, Observations, SimState
 from mocap_phc.amp import AMPHistory, AMPObservation, DiscriminatorTrainer, demo_windows, loss_config, window_frames
-from mocap_phc.rewards import ImitationReward, energy_penalty
+from mocap.imitation_rewards import ImitationReward, energy_penalty
 from mocap_phc.termination import Termination
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -123,45 +122,6 @@ class PHCObservation:
 
 
 # ------------------------------------------------------------------------------------ actions
-@dataclass(frozen=True)
-class ActionMap:
-    """Policy action (N, D) -> PD targets (N, D), rad.
-
-    * ``"absolute"`` (PHC): ``q = offset + scale * a`` (:func:`pd_offset_scale`);
-    * ``"residual"`` (UHC/RFC-style, FEASIBILITY's faster-learning choice): ``q = q^_{t+1} + a``,
-      the next reference pose plus the action.
-
-    ``clip`` (optional) clamps ``a`` to ``[-clip, clip]`` first.
-    """
-
-    mode: Literal["absolute", "residual"]
-    offset: Tensor
-    scale: Tensor
-    clip: float | None = None
-
-    @classmethod
-    def for_skeleton(
-        cls, skeleton: Skeleton, mode: Literal["absolute", "residual"], clip: float | None = None, overrides: dict[str, float] | None = None
-    ) -> "ActionMap":
-        if mode not in ("absolute", "residual"):
-            raise ValueError(f"unknown action mode {mode!r}; choose 'absolute' or 'residual'")
-        offset, scale = pd_offset_scale(skeleton, overrides)
-        return cls(mode, offset, scale, clip)
-
-    @property
-    def space(self) -> Box:
-        c = math.inf if self.clip is None else float(self.clip)
-        return Box((int(self.offset.numel()),), -c, c)
-
-    def __call__(self, actions: Tensor, ref_dof_pos: Tensor | None) -> Tensor:
-        a = actions if self.clip is None else actions.clamp(-self.clip, self.clip)
-        if self.mode == "absolute":
-            return self.offset.to(a) + self.scale.to(a) * a
-        if ref_dof_pos is None:
-            raise ValueError("residual actions need the next reference's DoF angles")
-        return ref_dof_pos.to(a) + a
-
-
 class PolicyImitator(Imitator):
     """An :class:`Imitator` from a policy on PHC's flat observation: ``observe`` builds
     :class:`PHCObservation`, ``act`` runs the policy and maps its action with :class:`ActionMap`.

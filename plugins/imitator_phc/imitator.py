@@ -24,7 +24,7 @@ from mocap.noisy import NoiseLevel
 from mocap.skeleton import Skeleton
 from mocap_phc.env import ActionMap, ImitationEnv, PHCObservation, PolicyImitator
 from mocap_phc.recovery import FailStateParams, RecoveryGoalParams
-from mocap_phc.rewards import DEFAULT_SCALES, DEFAULT_WEIGHTS
+from mocap.imitation_rewards import DEFAULT_SCALES, DEFAULT_WEIGHTS
 
 
 class PHCParams(BaseModel):

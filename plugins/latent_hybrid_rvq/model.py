@@ -79,7 +79,7 @@ from mocap.rl.networks import ACTIVATIONS, mlp
 from mocap.rl.normalizer import RunningNormalizer
 from mocap.skeleton import Skeleton
 from mocap.state import Observations
-from mocap_hybrid_rvq.quantizers import Quantizer, ResidualVQ, VectorQuantizer
+from mocap.quantizers import Quantizer, ResidualVQ, VectorQuantizer
 from mocap.bounds import LayerWidth
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 from torch import Tensor, nn

@@ -9,7 +9,7 @@ Modules:
 * :mod:`mocap_pulse.latent`: :class:`~mocap_pulse.latent.PulseParams` (every paper/code switch and
   the Table 3 / App. C.3 ablations), the networks and :class:`~mocap_pulse.latent.PulseLatent`;
 * :mod:`mocap_pulse.vq`: the App. C.3 VQ variant's partitioned quantizer (the hybrid_rvq plugin's
-  :class:`~mocap_hybrid_rvq.quantizers.VectorQuantizer`, imported);
+  :class:`~mocap.quantizers.VectorQuantizer`, imported);
 * :mod:`mocap_pulse.rl_term`: the Table 3 row 4 ablation, a PPO term on the imitation reward added to
   distillation (the distill trainer's optional RL hook);
 * :mod:`mocap_pulse.plugin`: the entry point registering the ``pulse`` latent space.

@@ -178,7 +178,7 @@ class PulseParams(BaseModel):
     rl_value_coef: float = Field(1.0, ge=0, description="rl_term: weight of the critic's ½(V − R)² loss (only the critic's weights get its gradient; [CODE] PPO critic_coef 5)")
     rl_normalize_advantages: bool = Field(True, description="rl_term: normalize advantages per minibatch ([CODE] rl_games normalizes)")
     rl_reward_form: Literal["paper", "code"] = Field(
-        "paper", description="rl_term: the phc imitation reward's error form (mocap_phc.rewards: 'paper' norms, 'code' mean squares)"
+        "paper", description="rl_term: the phc imitation reward's error form (mocap.imitation_rewards: 'paper' norms, 'code' mean squares)"
     )
     rl_critic_hidden: list[int] = Field(
         default_factory=lambda: [256, 256], min_length=1, description="rl_term: critic MLP hidden sizes on [s^p | s^g] ([CPU])"

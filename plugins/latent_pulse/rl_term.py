@@ -13,7 +13,7 @@ below is [INF], with switches where a choice matters:
   ``L_clip = −mean(min(ρ Â, clip(ρ, 1 ± ε) Â))`` is PPO's clipped surrogate (to minimize) with
   ``ρ = π(a | s) / π_old(a | s)``, and ``L_value = ½ mean (V(s) − R)²`` trains a critic
   ``V([s^p | s^g])`` owned by the latent (used only here). Advantages are GAE(γ, λ) of the imitation
-  reward (PHC's Eq. 2 terms from ``mocap_phc.rewards``, ``rl_reward_form``), normalized per minibatch
+  reward (PHC's Eq. 2 terms from ``mocap.imitation_rewards``, ``rl_reward_form``), normalized per minibatch
   when ``rl_normalize_advantages``.
 * **Policy** (``rl_policy``), i.e. which stochastic variable the policy gradient acts on:
     - ``"decoder"`` (the paper's wording): the action is ``a ~ N(D(s^p, z), σ_a² I)`` with a fixed
@@ -80,7 +80,7 @@ class PulseRLHook:
     it keeps no state between calls."""
 
     def __init__(self, latent: PulseLatent):
-        from mocap_phc.rewards import ImitationReward  # the phc imitator's reward (PHC Eq. 2)
+        from mocap.imitation_rewards import ImitationReward  # the phc imitator's reward (PHC Eq. 2)
 
         self.latent = latent
         self.reward_fn = ImitationReward(form=latent.params.rl_reward_form)

@@ -11,7 +11,7 @@ split into ``G`` partitions of ``D / G`` dims; each partition is replaced by its
 * straight-through estimator (VQ-VAE): the forward value is the codes, ``∂z/∂x = I``;
 * commitment loss ``mean (x − sg(e*))²`` (VQ-VAE's β term; mean over batch and dims): zero iff
   every partition of ``x`` equals its code;
-* the dictionaries are :class:`mocap_hybrid_rvq.quantizers.VectorQuantizer` (imported, not copied):
+* the dictionaries are :class:`mocap.quantizers.VectorQuantizer` (imported, not copied):
   EMA updates (VQ-VAE-EMA, so the codebook term of VQ-VAE's loss has no gradient and is left out),
   dead-code reset and k-means initialization from the first training batch. Codebooks change only
   in a forward pass with ``train=True``.
@@ -27,7 +27,7 @@ from typing import NamedTuple
 import torch
 from torch import Tensor, nn
 
-from mocap_hybrid_rvq.quantizers import CodebookInit, VectorQuantizer
+from mocap.quantizers import CodebookInit, VectorQuantizer
 
 
 class PartitionedOutput(NamedTuple):

@@ -412,7 +412,7 @@ def clip_frames(library: Any, clip_ids: Tensor, times: Tensor) -> MotionFrames:
 
 
 def _action_map(skeleton: Skeleton, params: VmpTrackerParams) -> Any:
-    from mocap_phc.env import ActionMap
+    from mocap.pd_actions import ActionMap
 
     return ActionMap.for_skeleton(skeleton, params.action, params.action_clip, {})
 

@@ -34,7 +34,7 @@ Reward ([P])::
 (``distance`` switch; ``pos_scale`` 2) and ``energy = -energy_weight sum_j (tau_j qdot_j)^2`` ([P]
 0.0005, squared) or ``-energy_weight sum_j |tau_j qdot_j|`` ([CODE] PHC power reward, not squared, 0 for
 the first 3 steps; the default, because the squared form measured about -1e2 per step on a falling
-amp humanoid; ``energy_form``), :func:`mocap_phc.rewards.energy_penalty`. The tracking term is in (0, 1] and the
+amp humanoid; ``energy_form``), :func:`mocap.imitation_rewards.energy_penalty`. The tracking term is in (0, 1] and the
 energy term <= 0: ``max_reward`` 1.
 
 Termination: a fall (:class:`~mocap_tasks.common.FallParams`; ground contacts include the height
@@ -64,7 +64,7 @@ from mocap.interfaces import Task
 from mocap.observations import world_to_heading
 from mocap.skeleton import Skeleton
 from mocap.state import HumanoidState, SimState
-from mocap_phc.rewards import energy_penalty
+from mocap.imitation_rewards import energy_penalty
 from mocap_sim_mujoco.terrain import TerrainParams, height_map
 from mocap_tasks.common import FallParams, TaskBase, root_heading, rows
 from pydantic import BaseModel, ConfigDict, Field, model_validator

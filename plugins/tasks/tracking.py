@@ -97,7 +97,7 @@ from mocap.rotations import (
 )
 from mocap.skeleton import Skeleton
 from mocap.state import HumanoidState, SimState, Trajectories
-from mocap_phc.rewards import (
+from mocap.imitation_rewards import (
     DEFAULT_SCALES,
     DEFAULT_WEIGHTS,
     TERMS,
@@ -171,7 +171,7 @@ def imitation_reward(
     scales: Sequence[float] = PHC_SCALES,
 ) -> tuple[Tensor, dict[str, Tensor]]:
     """PHC's ``r^g-imitation = sum_i w_i exp(-k_i e_i)`` over all bodies of ``sim``/``ref`` (the
-    imitator's :class:`mocap_phc.rewards.ImitationReward`): ``(reward (N,), terms)``."""
+    imitator's :class:`mocap.imitation_rewards.ImitationReward`): ``(reward (N,), terms)``."""
     return ImitationReward(form, tuple(weights), tuple(scales))(sim, ref)  # type: ignore[arg-type]
 
 
