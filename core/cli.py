@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 import sys
-import tempfile
 from pathlib import Path
 from typing import Annotated, Optional
 
@@ -18,7 +17,7 @@ from rich.console import Console
 from rich.table import Table
 
 from mocap import __version__
-from mocap.plugins import PluginError, PluginSet, get_plugins
+from mocap.plugins import PluginSet, get_plugins
 
 console = Console(soft_wrap=True)
 err_console = Console(stderr=True, soft_wrap=True)
@@ -27,20 +26,8 @@ EXIT_USER_ERROR = 2
 EXIT_INTERRUPTED = 130
 
 
-class UserError(Exception):
-    """An error in what the user gave us: printed as one clear message, exit code 2, no traceback."""
-
-
-def user_errors() -> tuple[type[BaseException], ...]:
-    """Exception types that are the user's input, not a bug (printed without a traceback): also a
-    checkpoint that cannot be used (:class:`~mocap.checkpoint.CheckpointError`) and a write that
-    failed for lack of disk space or permission (:class:`~mocap.checkpoint.StorageError`)."""
-    from mocap.checkpoint import CheckpointError, StorageError
-    from mocap.motion.clip import MotionDataError
-    from mocap.pipeline import StageFailed
-    from mocap.spec import SpecError
-
-    return (UserError, SpecError, PluginError, MotionDataError, StageFailed, CheckpointError, StorageError)
+from mocap.errors import UserError, user_errors  # noqa: E402  (re-exported: mocap.cli.UserError)
+from mocap.paths import check_output_dir  # noqa: E402  (re-exported)
 
 
 #: third-party modules -> the pip package that provides them (for the "not installed" message)
@@ -62,24 +49,6 @@ def missing_package_message(exc: ImportError) -> str | None:
         f"the Python package {package!r} is missing or broken (importing {name!r} failed{extra}); "
         f"install it into this environment: pip install {package}"
     )
-
-
-def check_output_dir(path: Path, option: str = "--out") -> None:
-    """Raise :class:`UserError` unless ``path`` is (or can be created as) a writable directory —
-    before anything is trained, so a bad ``--out`` costs nothing."""
-    path = Path(path)
-    for existing in (path, *path.parents):
-        if existing.exists() or existing.is_symlink():
-            if not existing.is_dir():
-                where = "it is" if existing == path else f"{existing} is"
-                raise UserError(f"{option} {path}: {where} a file, not a directory; choose another {option}")
-            break
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=path):
-            pass
-    except OSError as exc:
-        raise UserError(f"{option} {path}: not writable ({exc.strerror or exc}); choose another {option}") from None
 
 
 def fail(message: str, code: int = EXIT_USER_ERROR) -> "typer.Exit":

@@ -460,7 +460,7 @@ def _from_file(target: Path, plugins: Any) -> EvalTarget:
     import yaml
 
     from mocap.checkpoint import load_checkpoint
-    from mocap.cli import UserError
+    from mocap.errors import UserError
     from mocap.spec import SpecError, load_spec, validate_document
 
     if target.suffix in (".yaml", ".yml"):
@@ -518,7 +518,7 @@ def _check_known_format(path: Path, data: dict[str, Any]) -> None:
 
 
 def _check(t: EvalTarget, source: Path) -> EvalTarget:
-    from mocap.cli import UserError
+    from mocap.errors import UserError
 
     spec = t.spec
     if spec.imitator is None and t.latent_checkpoint is None:
@@ -582,7 +582,7 @@ def load_evaluation_target(target: Path, plugins: Any) -> EvalTarget:
 
     import yaml
 
-    from mocap.cli import UserError
+    from mocap.errors import UserError
     from mocap.spec import SpecError, load_spec, validate_document
 
     target = Path(target)
@@ -660,7 +660,7 @@ def build_evaluation_target(
         use_latent and target.latent_checkpoint is not None and not _is_distilled(Path(target.latent_checkpoint))
     )
     if own_tracker:  # a latent space that imitates on its own (VMP's tracker), even where the spec names an imitator
-        from mocap.cli import UserError
+        from mocap.errors import UserError
 
         latent = plugins.get("latent", spec.latent.name).build(
             resolved.params.get("latent"), skeleton=skeleton, checkpoint=target.latent_checkpoint, device=device

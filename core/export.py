@@ -25,7 +25,8 @@ EXPORTED_NAMES = {"imitator": "policy.pt", "latent": "latent.pt"}
 def export_run(run_dir: Path, dest: Path) -> Path:
     """Write ``dest/spec.yaml`` and copy the trained stages' files (module docstring); returns the spec path."""
     from mocap.checkpoint import atomic_write_bytes, atomic_write_text
-    from mocap.cli import UserError, check_output_dir
+    from mocap.errors import UserError
+    from mocap.paths import check_output_dir
 
     run_dir, dest = Path(run_dir), Path(dest)
     spec_file, stages_file = run_dir / "spec.yaml", run_dir / "stages.json"

@@ -386,7 +386,7 @@ def register_commands(app):  # type: ignore[no-untyped-def]
 
         from rich.console import Console
 
-        from mocap.cli import UserError
+        from mocap.errors import UserError
         from mocap.evaluation import build_evaluation_target, load_evaluation_target
         from mocap.plugins import get_plugins
 

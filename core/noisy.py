@@ -217,7 +217,7 @@ def render_noisy(result: dict[str, Any]) -> Any:
 
 def parse_levels(text: str) -> list[NoiseLevel]:
     """``"0,1,3"`` (indices into :data:`DEFAULT_LEVELS`) or ``"joint_deg:root_deg:root_m:drop_prob;..."``."""
-    from mocap.cli import UserError
+    from mocap.errors import UserError
 
     text = text.strip()
     try:
@@ -270,7 +270,7 @@ def register_commands(app: Any) -> None:
         from mocap.evaluation import build_evaluation_target, load_evaluation_target
         from mocap.plugins import get_plugins
 
-        from mocap.cli import UserError
+        from mocap.errors import UserError
 
         chosen = parse_levels(levels)
         if not 0 < smooth <= 1:

@@ -33,4 +33,26 @@ def confined(base: Path, *parts: str) -> Path:
     return path
 
 
-__all__ = ["MAX_STEM", "confined", "safe_filename"]
+def check_output_dir(path: Path, option: str = "--out") -> None:
+    """Raise :class:`UserError` unless ``path`` is (or can be created as) a writable directory —
+    before anything is trained, so a bad ``--out`` costs nothing."""
+    import tempfile
+
+    from mocap.errors import UserError
+
+    path = Path(path)
+    for existing in (path, *path.parents):
+        if existing.exists() or existing.is_symlink():
+            if not existing.is_dir():
+                where = "it is" if existing == path else f"{existing} is"
+                raise UserError(f"{option} {path}: {where} a file, not a directory; choose another {option}")
+            break
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=path):
+            pass
+    except OSError as exc:
+        raise UserError(f"{option} {path}: not writable ({exc.strerror or exc}); choose another {option}") from None
+
+
+__all__ = ["MAX_STEM", "check_output_dir", "confined", "safe_filename"]

@@ -145,7 +145,7 @@ class Player:
             self.controls.clip = self._clip_index(clip)
         if generate:
             if not can_generate:
-                from mocap.cli import UserError
+                from mocap.errors import UserError
 
                 raise UserError("--generate: the target has no latent space with a prior to sample (random_action)")
             self.controls.mode = "generate"
@@ -160,7 +160,7 @@ class Player:
         try:
             return self.lib.clip_index(name)
         except KeyError as exc:
-            from mocap.cli import UserError
+            from mocap.errors import UserError
 
             raise UserError(str(exc.args[0])) from None
 
@@ -395,7 +395,7 @@ def play(
     environ: Any = None,
 ) -> int:
     """``mocap play``: the viewer on one env of ``target``'s simulator (module docstring). Returns the frames drawn."""
-    from mocap.cli import UserError
+    from mocap.errors import UserError
 
     if not speed > 0:
         raise UserError(f"--speed must be positive, got {speed:g}")
@@ -455,7 +455,7 @@ def render_policy(
     the clip's duration; looping clips 10 s) with the reference as a ghost. ``generate``: a prior
     sample (:class:`Player` in generate mode, ``seed``) for ``seconds`` (default 10). Frames are
     ``width`` x ``height`` at the control rate. Returns the path and a one-line description."""
-    from mocap.cli import UserError
+    from mocap.errors import UserError
     from mocap.evaluation import build_evaluation_target, load_evaluation_target, record_video
     from mocap.plugins import get_plugins
 

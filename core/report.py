@@ -333,7 +333,7 @@ def rebuild_report(run_dir: Path) -> list[Path]:
     """Rewrite the reports of ``run_dir`` from what it holds: ``report.md`` (+ learning curves) of a
     run directory (``spec.yaml`` + ``stages.json``), and ``comparison.md`` (+ plots) of a comparison
     directory (``comparison.json``: its cells' runs are below it). Returns the files written."""
-    from mocap.cli import UserError
+    from mocap.errors import UserError
 
     run_dir = Path(run_dir)
     if not run_dir.is_dir():

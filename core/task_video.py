@@ -41,7 +41,7 @@ def render_task(
     """Record the task policy of ``run_dir`` for ``seconds`` into ``out`` (module docstring)."""
     import yaml
 
-    from mocap.cli import UserError
+    from mocap.errors import UserError
     from mocap.hierarchy import make_task_env
     from mocap.interfaces import Box, StageResult
     from mocap.pipeline import StageContext

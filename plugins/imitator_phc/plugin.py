@@ -74,7 +74,7 @@ def register_commands(app: Any) -> None:
         plugins = get_plugins()
         info = load_evaluation_target(target, plugins)
         loaded = build_evaluation_target(info, plugins, use_latent=not imitator_only)
-        from mocap.cli import UserError
+        from mocap.errors import UserError
 
         if reference not in ("still", "clip"):
             raise UserError(f"--reference must be 'still' or 'clip', not {reference!r}")

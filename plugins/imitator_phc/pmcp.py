@@ -584,7 +584,7 @@ class PMCPTrainer(Trainer):
             raise ValueError("pmcp: the motion set has no clips")
         self.clip_names = unique_clip_names([c.name for c in self.clips])
         if self.params.recovery is not None and getattr(self.component.params, "recovery_goal", None) is None:
-            from mocap.cli import UserError
+            from mocap.errors import UserError
 
             raise UserError(
                 "pmcp recovery needs the fail-state goal switch: set imitator.params.recovery_goal (e.g. {form: paper}); "
@@ -729,7 +729,7 @@ class PMCPTrainer(Trainer):
     def _given_primitive(self, state: dict[str, Any], prim: dict[str, Any]) -> None:
         """Primitive 0 from ``primitive0``: checked against this imitator's sizes, copied into
         ``prim0/``, evaluated on its clips and frozen (``end: given``)."""
-        from mocap.cli import UserError
+        from mocap.errors import UserError
 
         p, ctx = self.params, self.ctx
         assert p.primitive0 is not None

@@ -98,7 +98,7 @@ def cmd_render(
             f"(limit {MAX_VIDEO_BYTES / 2**30:.0f} GiB): lower --seconds, --fps or the frame size"
         )
 
-    from mocap.cli import UserError
+    from mocap.errors import UserError
 
     try:  # importing the module can already fail: mujoco loads the MUJOCO_GL backend on import
         from mocap_sim_mujoco.render import VideoRecorder

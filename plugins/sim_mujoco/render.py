@@ -44,7 +44,7 @@ from typing import Any, Sequence  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from mocap.cli import UserError  # noqa: E402
+from mocap.errors import UserError  # noqa: E402
 
 
 class RenderUnavailable(UserError):
