@@ -406,7 +406,10 @@ def _run_stage_locked(
     checkpoint = getattr(section, "checkpoint", None)
     if checkpoint is not None:
         if not dist.broadcast_object(Path(checkpoint).is_file()):
-            raise StageFailed(f"{stage}.checkpoint: {checkpoint}: no such file")
+            raise StageFailed(
+                f"{stage}.checkpoint: {checkpoint}: no such file (looked for {Path(checkpoint).resolve()}; paths written in a "
+                "spec file are relative to that file, paths given with --set relative to the working directory)"
+            )
         console.print(f"[green]{stage}[/]: using checkpoint {checkpoint}")
         return StageRecord(stage, key, workdir, StageResult(checkpoint=Path(checkpoint)), True, 0.0)
     trainer_ref = section.trainer

@@ -131,3 +131,15 @@ def test_docs_switches_table_is_current():
     committed = (Path(__file__).resolve().parents[1] / "docs" / "switches.md").read_text()
     assert render(get_plugins(), {"mocap"}) == committed, "regenerate: mocap switches --out docs/switches.md"
     assert "`reward_form`" in committed and "`dead_threshold_mode`" in committed and "`fail_states`" in committed
+
+
+def test_a_missing_set_checkpoint_names_the_resolved_path_and_the_rule(tmp_path, capsys, monkeypatch):
+    from pathlib import Path
+
+    spec = Path(__file__).resolve().parents[1] / "specs/imitator/amp_bundled.yaml"
+    monkeypatch.chdir(tmp_path)
+    rc = main(["run", str(spec), "--out", str(tmp_path / "run"), "--set", "imitator.checkpoint=nope/policy.pt", "--set", "imitator.trainer=null"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "Traceback" not in err
+    assert str(tmp_path / "nope" / "policy.pt") in err.replace("\n", "")
+    assert "relative to the working directory" in err.replace("\n", " ")
