@@ -457,6 +457,10 @@ def _run_stage_locked(
         elif main:
             with dist.solo():
                 result = trainer.run(ctx)
+    except BaseException:
+        if main:
+            _remove_if_empty(workdir)
+        raise
     finally:
         log.close()
         published = workdir / PUBLISHED_DIR
@@ -490,6 +494,17 @@ def _read_result(done: Path) -> StageResult:
     data = json.loads(done.read_text(encoding="utf-8"))
     ckpt = data.get("checkpoint")
     return StageResult(checkpoint=Path(ckpt) if ckpt else None, metrics=data.get("metrics", {}))
+
+
+def _remove_if_empty(workdir: Path) -> None:
+    """Remove a stage folder that a failed first attempt left with nothing but its ``spec.yaml``
+    (no checkpoint, no output): it would only litter the artifact store."""
+    try:
+        items = [p for p in workdir.iterdir() if p.name != "spec.yaml"]
+    except OSError:
+        return
+    if not items:
+        shutil.rmtree(workdir, ignore_errors=True)
 
 
 def _read_seconds(done: Path) -> float | None:

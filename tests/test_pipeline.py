@@ -142,3 +142,15 @@ def test_rerunning_a_finished_spec_keeps_the_original_training_times(tmp_path: P
     assert re.search(r"2 stages reused from earlier runs; their training took \d+\.\d s", report)
     stages = json.loads((out / "stages.json").read_text())
     assert all(s["trained_seconds"] is not None for s in stages)
+
+
+def test_a_stage_that_fails_before_any_output_leaves_no_empty_artifact_folder(tmp_path: Path, monkeypatch):
+    def boom(self, ctx):
+        raise RuntimeError("trainer bug")
+
+    monkeypatch.setattr(CountTrainer, "run", boom)
+    out = tmp_path / "runs" / "a"
+    with pytest.raises(RuntimeError, match="trainer bug"):
+        run_pipeline(resolve(), PSET, out, console=quiet())
+    store = tmp_path / "runs" / "artifacts"
+    assert not [p for p in store.iterdir() if p.is_dir()], list(store.iterdir())
