@@ -167,6 +167,8 @@ def evaluate_imitator(
             lengths.append((out.traj.mask.sum(0).double() - 1).clamp_min(0) * dt)
             instab.append(out.unstable)
             bar.advance(task, len(ids))
+            if console is not None and not console.is_terminal:  # logs and CI: a plain line instead of the bar
+                console.print(f"imitation eval: {min(start + len(ids), lib.num_clips)}/{lib.num_clips} clips", highlight=False)
     values = {k: torch.cat(v) for k, v in per_episode.items()}
     seconds = torch.cat(lengths)
     unstable = torch.cat(instab)

@@ -143,3 +143,24 @@ def test_a_missing_set_checkpoint_names_the_resolved_path_and_the_rule(tmp_path,
     assert rc == 2 and "Traceback" not in err
     assert str(tmp_path / "nope" / "policy.pt") in err.replace("\n", "")
     assert "relative to the working directory" in err.replace("\n", " ")
+
+
+def test_eval_progress_is_printed_when_not_a_terminal(amp):
+    """The eval stage's progress was blank in logs (a rich bar needs a terminal)."""
+    import io
+
+    from rich.console import Console
+
+    from mocap.baselines import PDReplay
+    from mocap.evaluation import ImitationEvalParams, evaluate_imitator
+    from mocap.motion.deepmimic import DeepMimicParams, DeepMimicSource
+    from mocap.motion.library import MotionLibrary
+    from mocap_sim_mujoco.simulator import MujocoSimulator
+
+    lib = MotionLibrary(DeepMimicSource(DeepMimicParams(clips=["walk", "kick", "run"])).load(amp), amp)
+    buf = io.StringIO()
+    console = Console(file=buf, force_terminal=False, width=120)
+    params = ImitationEvalParams(num_envs=2, horizon=0.5)
+    evaluate_imitator(PDReplay(), lib, lambda n: MujocoSimulator(skeleton=amp, num_envs=n), params, console=console)
+    text = buf.getvalue()
+    assert "imitation eval: 2/3 clips" in text and "imitation eval: 3/3 clips" in text
