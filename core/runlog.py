@@ -37,13 +37,23 @@ class MetricsLogger:
         for key, value in metrics.items():
             value = float(value)
             record[key] = value if math.isfinite(value) else None
-        with self.path.open("a", encoding="utf-8") as fh:
-            fh.write(json.dumps(record) + "\n")
-        writer = self._writer()
-        if writer is not None:
-            for key, value in metrics.items():
-                if math.isfinite(float(value)):
-                    writer.add_scalar(f"{self.stage}/{key}", float(value), int(step))
+        from mocap.checkpoint import StorageError
+
+        try:
+            with self.path.open("a", encoding="utf-8") as fh:
+                fh.write(json.dumps(record) + "\n")
+        except OSError as exc:  # a full disk, a read-only folder: one error line naming the file
+            raise StorageError(self.path, exc) from None
+        try:
+            writer = self._writer()
+            if writer is not None:
+                for key, value in metrics.items():
+                    if math.isfinite(float(value)):
+                        writer.add_scalar(f"{self.stage}/{key}", float(value), int(step))
+        except OSError as exc:  # TensorBoard's writer (its thread re-raises a failed write here)
+            tb_dir = self._tb_dir
+            self._drop_tensorboard()
+            raise StorageError(tb_dir or self.path, exc) from None
 
     def _writer(self) -> Any:
         if not self.enabled:
@@ -74,7 +84,14 @@ class MetricsLogger:
         kept = [r for r in self.records() if r.get("stage") != self.stage or r.get("step", 0) <= step]
         atomic_write_text(self.path, "".join(json.dumps(r) + "\n" for r in kept))
 
+    def _drop_tensorboard(self) -> None:
+        tb, self._tb, self._tb_dir = self._tb, None, None
+        if tb is not None:
+            try:
+                tb.close()
+            except Exception:  # noqa: BLE001 - already failing (full disk): the first error is the one reported
+                pass
+
     def close(self) -> None:
-        if self._tb is not None:
-            self._tb.close()
-            self._tb = None
+        """Flush and close TensorBoard; best effort (a write error was already raised by :meth:`log`)."""
+        self._drop_tensorboard()

@@ -97,3 +97,27 @@ def test_spec_documents_that_hung_or_crashed_are_one_error(tmp_path, capsys, tex
     assert main(["validate", str(path)]) == 2
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err and str(path) in err
+
+
+def test_a_full_disk_while_logging_metrics_is_one_storage_error(tmp_path, monkeypatch):
+    """A metrics / TensorBoard write on a full disk gave two tracebacks: now one StorageError naming the file."""
+    import builtins
+    import errno
+
+    from mocap.checkpoint import StorageError
+    from mocap.runlog import MetricsLogger
+
+    log = MetricsLogger(tmp_path / "metrics.jsonl", "imitator", tensorboard_dir=None, enabled=True)
+    log.log(1, x=1.0)
+    real_open = Path.open
+
+    def full(self, *a, **k):
+        if self.name == "metrics.jsonl":
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real_open(self, *a, **k)
+
+    monkeypatch.setattr(Path, "open", full)
+    with pytest.raises(StorageError, match="metrics.jsonl: the disk is full"):
+        log.log(2, x=2.0)
+    log.close()  # never raises
+    assert builtins is not None
