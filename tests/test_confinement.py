@@ -101,7 +101,6 @@ def test_spec_documents_that_hung_or_crashed_are_one_error(tmp_path, capsys, tex
 
 def test_a_full_disk_while_logging_metrics_is_one_storage_error(tmp_path, monkeypatch):
     """A metrics / TensorBoard write on a full disk gave two tracebacks: now one StorageError naming the file."""
-    import builtins
     import errno
 
     from mocap.checkpoint import StorageError
@@ -120,4 +119,3 @@ def test_a_full_disk_while_logging_metrics_is_one_storage_error(tmp_path, monkey
     with pytest.raises(StorageError, match="metrics.jsonl: the disk is full"):
         log.log(2, x=2.0)
     log.close()  # never raises
-    assert builtins is not None
