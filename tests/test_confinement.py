@@ -119,3 +119,54 @@ def test_a_full_disk_while_logging_metrics_is_one_storage_error(tmp_path, monkey
     with pytest.raises(StorageError, match="metrics.jsonl: the disk is full"):
         log.log(2, x=2.0)
     log.close()  # never raises
+
+
+# ------------------------------------------------------------------------- motion files (fuzz finds)
+def _deepmimic(tmp_path: Path, text: str, name: str = "clip.txt") -> Path:
+    path = tmp_path / name
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ('{"Frames": ' + "[" * 100_000 + "]" * 100_000 + "}", "nested too deeply|not valid JSON"),
+        ('{"Loop": "none", "Frames": [[' + ", ".join(["1" + "0" * 400] * 44) + "]]}", "non-numeric|frame"),
+    ],
+    ids=["deep", "huge-int"],
+)
+def test_deepmimic_files_that_crashed_the_loader_are_one_error(tmp_path, amp, text, message):
+    from mocap.motion.clip import MotionDataError
+    from mocap.motion.deepmimic import load_deepmimic_file
+
+    with pytest.raises(MotionDataError, match=message):
+        load_deepmimic_file(_deepmimic(tmp_path, text), amp)
+
+
+def test_a_utf8_bom_deepmimic_file_loads_and_a_directory_is_named_as_such(tmp_path, amp):
+    from mocap.motion.clip import MotionDataError
+    from mocap.motion.deepmimic import default_data_dir, load_deepmimic_file
+
+    original = Path(default_data_dir()) / "humanoid3d_walk.txt"
+    bom = tmp_path / "walk_bom.txt"
+    bom.write_bytes(b"\xef\xbb\xbf" + original.read_bytes())
+    assert load_deepmimic_file(bom, amp).num_frames == load_deepmimic_file(original, amp).num_frames
+    with pytest.raises(MotionDataError, match="a directory"):
+        load_deepmimic_file(tmp_path, amp)
+
+
+def test_amass_rate_out_of_range_and_empty_folder_are_named(tmp_path, smpl):
+    import numpy as np
+
+    from mocap.motion.amass import AmassParams, AmassSource, load_amass_file
+    from mocap.motion.clip import MotionDataError
+
+    path = tmp_path / "a.npz"
+    np.savez(path, poses=np.zeros((4, 156)), trans=np.zeros((4, 3)), mocap_framerate=1e-9, betas=np.zeros(16))
+    with pytest.raises(MotionDataError, match="mocap_framerate must be between"):
+        load_amass_file(path, smpl)
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with pytest.raises(MotionDataError, match=f"no AMASS files found in {empty}"):
+        AmassSource(AmassParams(paths=[empty])).load(smpl)

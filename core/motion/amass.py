@@ -113,6 +113,10 @@ def _read(path: Path) -> tuple[np.ndarray, np.ndarray, float]:
     return poses, trans, rate
 
 
+#: plausible capture rates, Hz (AMASS: 60-250; a rate of 1e-9 would ask for terabytes when resampled)
+MIN_RATE, MAX_RATE = 1.0, 10_000.0
+
+
 def load_amass_file(
     path: str | Path,
     skeleton: Skeleton,
@@ -131,8 +135,8 @@ def load_amass_file(
         raise MotionDataError(f"{path}: clip has no frames")
     if trans.shape != (T, 3):
         raise MotionDataError(f"{path}: trans has shape {trans.shape}, expected ({T}, 3) to match poses")
-    if not np.isfinite(rate) or rate <= 0:
-        raise MotionDataError(f"{path}: mocap_framerate must be positive, got {rate}")
+    if not np.isfinite(rate) or not MIN_RATE <= rate <= MAX_RATE:
+        raise MotionDataError(f"{path}: mocap_framerate must be between {MIN_RATE:g} and {MAX_RATE:g} Hz, got {rate}")
     check_finite(path, "poses", poses)
     check_finite(path, "trans", trans)
     if T < 2:
@@ -201,5 +205,6 @@ class AmassSource(MotionSource):
             expand_paths(p.paths, ".npz", ignore=lambda f: f.name == "shape.npz"),
             lambda path, name: load_amass_file(path, skeleton, name, fps=p.fps, up_axis=p.up_axis),
             skip_bad=p.skip_bad,
+            where=p.paths,
             what="AMASS",
         )

@@ -153,6 +153,10 @@ def _frame_rate(path: Path, durations: np.ndarray) -> tuple[float, bool]:
     return fps, uniform
 
 
+#: largest DeepMimic file read (the bundled clips are 10-200 kB)
+MAX_FILE_BYTES = 64 * 2**20
+
+
 def load_deepmimic_file(path: str | Path, skeleton: Skeleton, name: str | None = None) -> Clip:
     """Read one DeepMimic JSON motion file and convert it to a z-up :class:`Clip` on ``skeleton``.
 
@@ -163,14 +167,20 @@ def load_deepmimic_file(path: str | Path, skeleton: Skeleton, name: str | None =
     path = Path(path)
     name = name or path.stem.removeprefix(FILE_PREFIX)
     check_skeleton(skeleton, str(path))
+    if path.is_dir():
+        raise MotionDataError(f"{path}: a directory, not a DeepMimic motion file")
     if not path.is_file():
         raise MotionDataError(f"{path}: no such file")
+    if path.stat().st_size > MAX_FILE_BYTES:
+        raise MotionDataError(f"{path}: {path.stat().st_size:,} bytes; a DeepMimic clip is at most {MAX_FILE_BYTES:,}")
     try:
-        doc = json.loads(path.read_text())
+        doc = json.loads(path.read_text(encoding="utf-8-sig"))  # -sig: a UTF-8 byte-order mark is accepted
     except json.JSONDecodeError as exc:
         raise MotionDataError(f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise MotionDataError(f"{path}: unreadable ({type(exc).__name__}: {exc})") from None
+    except RecursionError:
+        raise MotionDataError(f"{path}: not a DeepMimic motion file (JSON nested too deeply)") from None
+    except (OSError, UnicodeDecodeError, ValueError) as exc:  # ValueError: e.g. an integer too long to parse
+        raise MotionDataError(f"{path}: unreadable ({type(exc).__name__}: {str(exc)[:200]})") from None
     if not isinstance(doc, dict) or "Frames" not in doc:
         raise MotionDataError(f"{path}: not a DeepMimic motion file (missing the 'Frames' key)")
     loop_mode = doc.get("Loop", "none")
@@ -185,7 +195,7 @@ def load_deepmimic_file(path: str | Path, skeleton: Skeleton, name: str | None =
             raise MotionDataError(f"{path}: frame {i} has {got} values, expected {FRAME_WIDTH}")
     try:
         data = np.asarray(frames, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:  # OverflowError: an integer like 10**400
         raise MotionDataError(f"{path}: frames hold non-numeric values ({exc})") from None
     check_finite(path, "frame data", data)
     T = data.shape[0]

@@ -58,6 +58,7 @@ def load_each(
     *,
     skip_bad: bool,
     what: str,
+    where: Sequence[Path | str] | None = None,
 ) -> MotionSet:
     """Load ``(path, clip_name)`` items with ``load_one``; skip or raise on :class:`MotionDataError`.
 
@@ -76,7 +77,8 @@ def load_each(
         if out.skipped:
             listed = "; ".join(reason for _, reason in out.skipped)
             raise MotionDataError(f"no {what} clip could be loaded ({len(out.skipped)} file(s) skipped): {listed}")
-        raise MotionDataError(f"no {what} files found")
+        searched = f" in {', '.join(str(Path(w).expanduser()) for w in where)} (folders searched recursively)" if where else ""
+        raise MotionDataError(f"no {what} files found{searched}")
     return out
 
 
@@ -169,4 +171,6 @@ class NpzSource(MotionSource):
             check_clip_skeleton(clip, skeleton, str(path))
             return clip
 
-        return load_each(expand_paths(self.params.paths, ".npz"), one, skip_bad=self.params.skip_bad, what="native npz")
+        return load_each(
+            expand_paths(self.params.paths, ".npz"), one, skip_bad=self.params.skip_bad, what="native npz", where=self.params.paths
+        )
