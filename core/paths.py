@@ -41,12 +41,15 @@ def check_output_dir(path: Path, option: str = "--out") -> None:
     from mocap.errors import UserError
 
     path = Path(path)
-    for existing in (path, *path.parents):
-        if existing.exists() or existing.is_symlink():
-            if not existing.is_dir():
-                where = "it is" if existing == path else f"{existing} is"
-                raise UserError(f"{option} {path}: {where} a file, not a directory; choose another {option}")
-            break
+    try:
+        for existing in (path, *path.parents):
+            if existing.exists() or existing.is_symlink():
+                if not existing.is_dir():
+                    where = "it is" if existing == path else f"{existing} is"
+                    raise UserError(f"{option} {path}: {where} a file, not a directory; choose another {option}")
+                break
+    except OSError as exc:  # e.g. a name longer than the file system allows (ENAMETOOLONG)
+        raise UserError(f"{option} {path}: not a usable path ({exc.strerror or exc}); choose another {option}") from None
     try:
         path.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryFile(dir=path):

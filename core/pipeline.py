@@ -85,7 +85,7 @@ def stage_keys(spec: Spec) -> dict[str, str]:
         ckpt = section.get("checkpoint") if isinstance(section, dict) else None
         if ckpt:
             path = Path(ckpt)
-            content = _file_digest(path) if path.is_file() else f"missing:{path}"
+            content = _file_digest(path) if _is_file(path) else f"missing:{path}"
             material = {"format": ARTIFACT_FORMAT, "stage": stage, "name": section["name"], "checkpoint": content}
         else:
             material = {"format": ARTIFACT_FORMAT, "stage": stage, "section": section, "context": context, "upstream": upstream}
@@ -93,6 +93,14 @@ def stage_keys(spec: Spec) -> dict[str, str]:
         keys[stage] = key
         upstream = [*upstream, key]
     return keys
+
+
+def _is_file(path: Path) -> bool:
+    """``path.is_file()``, False for a path the OS cannot even look up (a name over 255 bytes)."""
+    try:
+        return path.is_file()
+    except OSError:
+        return False
 
 
 def derive_seed(seed: int, stage: str) -> int:

@@ -170,3 +170,15 @@ def test_amass_rate_out_of_range_and_empty_folder_are_named(tmp_path, smpl):
     empty.mkdir()
     with pytest.raises(MotionDataError, match=f"no AMASS files found in {empty}"):
         AmassSource(AmassParams(paths=[empty])).load(smpl)
+
+
+def test_path_components_over_255_bytes_are_one_error(tmp_path, capsys):
+    from mocap.cli import main
+
+    long = "x" * 300
+    spec = REPO / "specs/imitator/amp_bundled.yaml"
+    assert main(["run", str(spec), "--out", str(tmp_path / long)]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "not a usable path" in err or "not writable" in err
+    assert main(["validate", str(spec), "--set", f"imitator.checkpoint={tmp_path / long / 'p.pt'}", "--set", "imitator.trainer=null"]) in (0, 2)
+    assert "Traceback" not in capsys.readouterr().err
