@@ -459,8 +459,6 @@ def _stage_checkpoint(spec: Any, stage: str) -> Path | None:
 
 
 def _from_file(target: Path, plugins: Any) -> EvalTarget:
-    import yaml
-
     from mocap.checkpoint import load_checkpoint
     from mocap.errors import UserError
     from mocap.spec import SpecError, load_spec, validate_document
@@ -479,7 +477,9 @@ def _from_file(target: Path, plugins: Any) -> EvalTarget:
         raise UserError(f"{target}: the checkpoint carries no spec; evaluate its run directory instead")
     from mocap.export import resolve_embedded_paths
 
-    doc = resolve_embedded_paths(yaml.safe_load(spec_yaml), target.parent)
+    from mocap.runfiles import yaml_mapping
+
+    doc = resolve_embedded_paths(yaml_mapping(spec_yaml, f"{target} (embedded spec)"), target.parent)
     resolved = validate_document(doc, plugins, source=f"{target} (embedded spec)")
     from mocap.distill import CHECKPOINT_FORMAT as DISTILL_FORMAT, LATENT_FORMAT
 
@@ -580,10 +580,6 @@ def load_evaluation_target(target: Path, plugins: Any) -> EvalTarget:
       ``checkpoint:`` files (relative to it), else its ``latent.pt`` or ``policy.pt``;
     * a spec file whose imitator (and latent) stages name ``checkpoint:`` files.
     """
-    import json
-
-    import yaml
-
     from mocap.errors import UserError
     from mocap.spec import SpecError, load_spec, validate_document
 
@@ -591,9 +587,11 @@ def load_evaluation_target(target: Path, plugins: Any) -> EvalTarget:
     if target.is_dir():
         spec_file, stages_file = target / "spec.yaml", target / "stages.json"
         if stages_file.is_file() and spec_file.is_file():
-            resolved = validate_document(yaml.safe_load(spec_file.read_text()), plugins, source=str(spec_file))
+            from mocap.runfiles import read_spec_file, read_stages
+
+            resolved = validate_document(read_spec_file(spec_file), plugins, source=str(spec_file))
             found: dict[str, Path] = {}
-            for stage in json.loads(stages_file.read_text()):
+            for stage in read_stages(stages_file):
                 if stage["stage"] in ("imitator", "latent") and stage.get("checkpoint"):
                     found[stage["stage"]] = Path(stage["checkpoint"])
             if resolved.spec.imitator is None and "latent" not in found:

@@ -9,7 +9,6 @@ being copied. ``mocap eval DEST`` and ``mocap generate DEST`` then work from any
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 from typing import Annotated, Any
@@ -32,8 +31,10 @@ def export_run(run_dir: Path, dest: Path) -> Path:
     spec_file, stages_file = run_dir / "spec.yaml", run_dir / "stages.json"
     if not (spec_file.is_file() and stages_file.is_file()):
         raise UserError(f"{run_dir}: not a finished run directory (spec.yaml + stages.json)")
-    doc: dict[str, Any] = yaml.safe_load(spec_file.read_text())
-    stages = {s["stage"]: s for s in json.loads(stages_file.read_text())}
+    from mocap.runfiles import read_spec_file, read_stages
+
+    doc: dict[str, Any] = read_spec_file(spec_file)
+    stages = {s["stage"]: s for s in read_stages(stages_file)}
     check_output_dir(dest, "DEST")  # a file, or not writable: one clear error before anything is copied
     exported = []
     for stage, name in EXPORTED_NAMES.items():

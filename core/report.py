@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any, Sequence
 
 from mocap.checkpoint import atomic_write_text, hardware, package_versions
 from mocap.metric_display import metric_label
+from mocap.runfiles import read_stages
 
 if TYPE_CHECKING:  # pragma: no cover
     from mocap.pipeline import StageRecord
@@ -358,7 +359,7 @@ def rebuild_report(run_dir: Path) -> list[Path]:
 
         resolved = load_spec(run_dir / "spec.yaml", get_plugins())
         records = []
-        for s in json.loads((run_dir / "stages.json").read_text(encoding="utf-8")):
+        for s in read_stages(run_dir / "stages.json"):
             ckpt = s.get("checkpoint")
             result = StageResult(checkpoint=Path(ckpt) if ckpt else None, metrics=dict(s.get("metrics") or {}))
             records.append(

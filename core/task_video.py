@@ -15,12 +15,12 @@ direction; strike: the target's centre and top, so a knocked-over target shows).
 
 from __future__ import annotations
 
-import json
 import tempfile
 from pathlib import Path
 from typing import Any
 
 import torch
+from mocap.runfiles import read_spec_file, read_stages
 
 
 def task_stage(run_dir: Path) -> dict[str, Any] | None:
@@ -29,7 +29,7 @@ def task_stage(run_dir: Path) -> dict[str, Any] | None:
     if not (Path(run_dir).is_dir() and stages_file.is_file()):
         return None
     try:
-        stages = json.loads(stages_file.read_text())
+        stages = read_stages(stages_file)
     except (OSError, ValueError):
         return None
     return next((s for s in stages if isinstance(s, dict) and s.get("stage") == "task"), None)
@@ -39,8 +39,6 @@ def render_task(
     run_dir: Path, out: Path, *, seconds: float = 10.0, seed: int | None = None, width: int = 640, height: int = 480
 ) -> tuple[Path, str]:
     """Record the task policy of ``run_dir`` for ``seconds`` into ``out`` (module docstring)."""
-    import yaml
-
     from mocap.errors import UserError
     from mocap.hierarchy import make_task_env
     from mocap.interfaces import Box, StageResult
@@ -59,12 +57,12 @@ def render_task(
         raise UserError(f"{run_dir}: the task policy {policy_path} does not exist (moved?)")
     plugins = get_plugins()
     try:
-        resolved = validate_document(yaml.safe_load((run_dir / "spec.yaml").read_text()), plugins, source=str(run_dir / "spec.yaml"))
+        resolved = validate_document(read_spec_file(run_dir / "spec.yaml"), plugins, source=str(run_dir / "spec.yaml"))
     except SpecError as exc:
         raise UserError(str(exc)) from None
     upstream = {
         s["stage"]: StageResult(Path(s["checkpoint"]) if s.get("checkpoint") else None)
-        for s in json.loads((run_dir / "stages.json").read_text())
+        for s in read_stages(run_dir / "stages.json")
         if s.get("stage") in ("imitator", "latent")
     }
     from rich.console import Console

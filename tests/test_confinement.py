@@ -182,3 +182,26 @@ def test_path_components_over_255_bytes_are_one_error(tmp_path, capsys):
     assert "Traceback" not in err and ("not a usable path" in err or "not writable" in err)
     assert main(["validate", str(spec), "--set", f"imitator.checkpoint={tmp_path / long / 'p.pt'}", "--set", "imitator.trainer=null"]) in (0, 2)
     assert "Traceback" not in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "spec_text, stages_text, message",
+    [
+        ("spec_version: 1\nname: [unclosed\n", "[]", "not a valid spec"),
+        ("- a list\n", "[]", "not a mapping"),
+        (None, "{not json", "corrupt run record"),
+        (None, '[{"no_stage": 1}]', "corrupt run record"),
+    ],
+    ids=["bad-yaml", "not-mapping", "stages-not-json", "stages-missing-keys"],
+)
+def test_corrupt_run_metadata_is_one_error(tmp_path, capsys, spec_text, stages_text, message):
+    from mocap.cli import main
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "spec.yaml").write_text(spec_text if spec_text is not None else (REPO / "specs/imitator/amp_bundled.yaml").read_text())
+    (run / "stages.json").write_text(stages_text)
+    for argv in (["eval", str(run)], ["export", str(run), str(tmp_path / "out")]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert message in err and "Traceback" not in err, (argv, err)
