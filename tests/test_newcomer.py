@@ -164,3 +164,15 @@ def test_eval_progress_is_printed_when_not_a_terminal(amp):
     evaluate_imitator(PDReplay(), lib, lambda n: MujocoSimulator(skeleton=amp, num_envs=n), params, console=console)
     text = buf.getvalue()
     assert "imitation eval: 2/3 clips" in text and "imitation eval: 3/3 clips" in text
+
+
+def test_a_training_distill_checkpoint_carries_its_label(tmp_path):
+    """`mocap generate` of a still-training PULSE run said to set label: pd_targets, which the spec had:
+    the label of a distill.pt is read from its params, as latent.pt keeps it in extra."""
+    import torch
+
+    from mocap.distill import CHECKPOINT_FORMAT, load_latent_state
+
+    path = tmp_path / "distill.pt"
+    torch.save({"format": CHECKPOINT_FORMAT, "student": {}, "latent_config": {}, "params": {"label": "pd_targets"}}, path)
+    assert load_latent_state(path)["extra"]["label"] == "pd_targets"
