@@ -59,7 +59,7 @@ from torch import Tensor
 
 from mocap.hooks import hookimpl
 from mocap.interfaces import Box, LatentSample, LatentSpace, Simulator, Task
-from mocap.motion.library import MotionLibrary
+from mocap.motion.library import MotionLibrary, grid_start_times
 from mocap.observations import proprioception
 from mocap.rl.env import StepResult
 from mocap.skeleton import Skeleton
@@ -161,6 +161,11 @@ class TaskEnv:
         attach_motions = getattr(task, "attach_motions", None)
         if callable(attach_motions):
             attach_motions(library)
+        # a task that follows the clip it started from reads the reference every step: start it on
+        # the control grid and read the reference from the precomputed table (MotionLibrary.use_control_grid)
+        self._tracks_reference = callable(getattr(task, "reference_start", None))
+        if self._tracks_reference:
+            library.use_control_grid(float(sim.dt), self.episode_steps + 2)
 
     # ------------------------------------------------------------------------------- helpers
     def _proprio(self, state: SimState) -> Observations:
@@ -173,6 +178,10 @@ class TaskEnv:
         from mocap.generation import start_states
 
         clip_ids, times = start_states(self.library, len(ids), self.skeleton, self.start_min_height, self._gen)
+        if self._tracks_reference:
+            lib = self.library
+            dur = lib.durations.to(times.device, torch.float64)[clip_ids]
+            times = grid_start_times(times.to(torch.float64), dur, lib.loops[clip_ids], float(self.sim.dt))
         frames: HumanoidState = self.library.frames(clip_ids, times)
         start_state = getattr(self.task, "start_state", None)
         if callable(start_state):  # terrain spawn square, keyframe-sequence start
