@@ -92,6 +92,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from torch import Tensor
 
 from mocap.interfaces import Imitator
+from mocap.motion.library import grid_start_times
 from mocap.observations import proprioception, proprioception_dim
 from mocap.rl.env import StepResult
 from mocap.rotations import (
@@ -464,6 +465,8 @@ class VmpTrackingEnv:
         self.proprio_dim = proprioception_dim(skeleton.num_bodies) + p.prev_actions * A
         self.obs_dim = self.proprio_dim + self.cond.dim
         self.episode_steps = max(1, round(p.episode_length_s / self.dt))
+        # start times on the control grid: the reference of every step is a table lookup (MotionLibrary.use_control_grid)
+        self.library.use_control_grid(self.dt, self.episode_steps + 2)
         self.persist = persist_steps(p.termination_persist_s, self.dt)
         # n_g of reward_form 'exp': feature dimensions of each tracking group
         self.track_dims = {g: sl.stop - sl.start for g, sl in self.layout.slices.items() if g in TRACK_TERMS}
@@ -510,7 +513,7 @@ class VmpTrackingEnv:
         clips = clips.to(self.device)
         dur = self._dur[clips]
         t0 = torch.minimum(times.to(self.device, torch.float64), (dur - self.dt).clamp_min(0.0))
-        return clips, t0
+        return clips, grid_start_times(t0, dur, torch.zeros_like(clips, dtype=torch.bool), self.dt)
 
     def _reset_envs(self, ids: Tensor) -> None:
         n = int(ids.numel())
