@@ -344,3 +344,18 @@ def test_task_state_round_trip_restores_the_history(amp, lib, vmp_file):
     torch.testing.assert_close(ta, tb)
     assert not torch.allclose(ta, tc)  # without the history (c) the tracker sees other previous actions
     sim.close()
+
+
+def test_segment_labels_follow_the_papers_protocol():
+    """VMP Sec. 5.4: consecutive 2 s of codes form a class, the next 2 s are left out (issue 27 item 9)."""
+    from mocap_vmp.metrics import segment_labels
+
+    frame_clip = torch.cat((torch.zeros(150, dtype=torch.long), torch.ones(30, dtype=torch.long)))
+    y = segment_labels(frame_clip, torch.tensor([30.0, 30.0]))
+    assert torch.equal(y[:60], torch.zeros(60, dtype=torch.long))
+    assert bool((y[60:120] == -1).all())
+    assert torch.equal(y[120:150], torch.ones(30, dtype=torch.long))
+    assert torch.equal(y[150:], torch.full((30,), 2, dtype=torch.long))
+    # at another frame rate the same seconds
+    y60 = segment_labels(torch.zeros(300, dtype=torch.long), torch.tensor([60.0]))
+    assert int((y60 == 0).sum()) == 120 and int((y60 == -1).sum()) == 120 and int((y60 == 1).sum()) == 60
