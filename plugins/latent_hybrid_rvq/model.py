@@ -1,5 +1,13 @@
 """The hybrid latent space of Bae et al. 2025 ("Marginal Quantization", Alg. 1) and its baselines.
 
+**Shared-teacher protocol (a deliberate departure).** The paper trains its own expert with its own
+state (Eq. 7), a quaternion-difference goal (Eq. 9), residual actions ``q + a``, a multiplicative
+expert reward with the AMP style term ``-5 log(1 - D)`` (Eq. 11) and a 0.5 m max-body termination,
+and distills from it. Here the latent is distilled from the framework's PHC imitator, with that
+imitator's observations, actions and reward, exactly as PULSE is: the comparison between the
+latent spaces (PULSE vs hybrid vs VMP) then measures the latent space alone, with one teacher. The
+paper's expert is not implemented; the README's method table states this too.
+
 Networks (sizes [DEFAULT]; the paper gives none), on running-normalized inputs:
 
 * posterior f_φ(s, s̃) → z ∈ R^D (deterministic; the continuous baseline: μ, log σ);

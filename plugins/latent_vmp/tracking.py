@@ -14,6 +14,14 @@ control step this is exactly one clip frame per step, the paper's "shift by one 
 
     s_t   proprioception (mocap.observations.proprioception, 15 B - 2)
           | a_{t-1} | a_{t-2}   raw policy actions of the two previous steps ([P]; ``prev_actions``)
+
+  A deliberate departure, not an oversight: VMP Sec. 4 observes a 217-dim vector of root height,
+  root velocities, joint states (q, q-dot) and key-body positions in the heading frame (plus the two
+  previous actions); this tracker uses the shared PHC proprioception instead (heading-frame body
+  positions, rotations and velocities of every body, which contain all of the paper's terms but
+  the joint angles themselves), so that every latent space in the framework sees the same robot
+  state and the comparison between them is about the latent, not about the observation. The two
+  previous actions are the paper's.
     c_t   conditioning, by ``conditioning``:
           M    m_t                                  F
           M5   m_t | m_{t+1} .. m_{t+5}             6 F
