@@ -552,3 +552,36 @@ def test_relative_dead_threshold_scales_with_the_batch() -> None:
     assert int(rel.reset_dead(x).sum()) == 0
     with pytest.raises(ValueError, match="dead_threshold_mode"):
         VectorQuantizer(4, 8, dead_threshold_mode="fraction")  # type: ignore[arg-type]
+
+
+@settings(max_examples=25, deadline=None)
+@given(b=st.integers(8, 64), seed=st.integers(0, 2**31 - 1))
+def test_training_output_equals_decoded_indices_with_per_sample_dropout(b: int, seed: int) -> None:
+    """quantized == decode(indices) also in training mode, with per-sample quantizer dropout (levels
+    a sample skipped report -1 and add nothing); codebooks frozen so that decode sees the codes used."""
+    torch.manual_seed(seed)
+    rvq = ResidualVQ(4, num_quantizers=4, codebook_size=16, decay=1.0, dead_threshold=0.0, dropout=True, dropout_per_sample=True)
+    rvq.train()
+    x = torch.randn(b, 4)
+    out = rvq(x)
+    assert bool((out.indices == -1).any()) or b < 16  # some samples used fewer levels
+    torch.testing.assert_close(out.quantized.detach(), rvq.decode(out.indices), atol=1e-6, rtol=0)
+
+
+@settings(max_examples=25, deadline=None)
+@given(n=st.integers(1, 40), k=st.integers(1, 24), seed=st.integers(0, 2**31 - 1))
+def test_kmeans_centres_are_rows_or_means_inside_the_data(n: int, k: int, seed: int) -> None:
+    """k-means initialization never leaves a centre at zero or outside the data: each centre is a
+    batch row (an empty cluster keeps its row; with fewer rows than codes every centre is a row) or
+    a mean of rows, so it lies in the data's bounding box; data far from the origin shows a zero."""
+    from mocap.quantizers import kmeans
+
+    torch.manual_seed(seed)
+    x = torch.randn(n, 3, dtype=torch.float64) + 10.0
+    centres, counts = kmeans(x, k, iters=5)
+    assert centres.shape == (k, 3) and int(counts.sum()) == n
+    lo, hi = x.min(0).values, x.max(0).values
+    assert bool(((centres >= lo - 1e-9) & (centres <= hi + 1e-9)).all())
+    assert bool((centres.abs().sum(-1) > 0).all())
+    if n == 1:  # a single row: every centre is that row
+        torch.testing.assert_close(centres, x.expand(k, 3))
