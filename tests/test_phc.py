@@ -514,3 +514,47 @@ def test_control_grid_starts_and_reference(amp, clips, grid):
     expect = plain.frames(env.clip_ids, t)
     torch.testing.assert_close(env._ref_next.body_pos[live], expect.body_pos[live], atol=2e-6, rtol=0)
     env.close()
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    term=st.sampled_from(["pos", "rot", "vel", "ang_vel"]),
+    form=st.sampled_from(["paper", "code"]),
+    scales=st.tuples(*[st.floats(0.05, 200.0)] * 4),
+)
+def test_each_reward_term_responds_to_its_own_quantity_and_scale_alone(seed, term, form, scales):
+    """Issue 27 item 11: perturb one quantity alone; only its term drops, to exp(-k e) with e computed
+    here from the perturbation (rotation: the angle, both forms), for any of the four scales."""
+    from dataclasses import replace as dc_replace
+
+    from mocap.rotations import quat_from_axis_angle, quat_mul
+
+    rng = np.random.default_rng(seed)
+    ref = random_state(rng, 3, 5)
+    delta = torch.as_tensor(rng.normal(0, 0.2, (3, 5, 3)), dtype=F64)
+    if term == "pos":
+        sim = dc_replace(ref, body_pos=ref.body_pos + delta)
+        norms = delta.norm(dim=-1)
+    elif term == "vel":
+        sim = dc_replace(ref, body_lin_vel=ref.body_lin_vel + delta)
+        norms = delta.norm(dim=-1)
+    elif term == "ang_vel":
+        sim = dc_replace(ref, body_ang_vel=ref.body_ang_vel + delta)
+        norms = delta.norm(dim=-1)
+    else:
+        angle = torch.as_tensor(rng.uniform(0.05, 2.5, (3, 5)), dtype=F64)
+        rot = quat_from_axis_angle(delta / delta.norm(dim=-1, keepdim=True), angle)
+        sim = dc_replace(ref, body_rot=quat_mul(rot, ref.body_rot))
+        norms = angle
+    if form == "paper":
+        e = norms.mean(-1)
+    else:
+        e = norms.square().mean(-1) if term == "rot" else delta.square().mean(dim=(-1, -2))
+    reward = ImitationReward(form, (0.5, 0.3, 0.1, 0.1), tuple(scales))
+    terms = reward.terms(sim, ref)
+    k = dict(zip(("pos", "rot", "vel", "ang_vel"), scales))[term]
+    torch.testing.assert_close(terms[term], torch.exp(-k * e), atol=1e-9, rtol=1e-7)
+    for other in ("pos", "rot", "vel", "ang_vel"):
+        if other != term:
+            torch.testing.assert_close(terms[other], torch.ones(3, dtype=F64), atol=1e-9, rtol=0)
