@@ -380,3 +380,37 @@ def test_registry_dims_and_checkpoint_round_trip(amp, tmp_path):
             assert torch.equal(a, b), k
     with pytest.raises(ValueError, match="latent_dim"):
         make_pulse(PulseParams(**{**small, "latent_dim": 5}), skeleton=amp, checkpoint=tmp_path / "latent.pt")
+
+
+def test_distillation_kl_is_the_posterior_to_prior_kl_at_the_call_site():
+    """Issue 27 item 11: the loss's KL term equals KL(posterior || prior) written out here (the
+    direction of Eq. 3), not the reverse."""
+    lat = tiny_latent(2)
+    obs = random_obs(6, seed=4)
+    starts = torch.zeros(3, 2, dtype=torch.bool)
+    starts[0] = True
+    out = lat.distill_losses(obs, torch.randn(6, A_DIM), starts, progress=0.0)
+    p, g, _ = lat._inputs(obs)
+    mu_q, lv_q = lat._posterior(p, g)
+    mu_p, lv_p = lat._prior(p)
+    forward = 0.5 * (lv_p - lv_q + (lv_q.exp() + (mu_q - mu_p) ** 2) / lv_p.exp() - 1.0).sum(-1).mean()
+    reverse = 0.5 * (lv_q - lv_p + (lv_p.exp() + (mu_q - mu_p) ** 2) / lv_q.exp() - 1.0).sum(-1).mean()
+    assert torch.allclose(out["kl"], forward.detach(), rtol=1e-5, atol=1e-6)
+    assert not torch.allclose(forward, reverse, rtol=1e-3)
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=seeds, T=st.integers(2, 6), N=st.integers(1, 4), form=st.sampled_from(["paper", "code"]))
+def test_regularizer_is_the_mean_over_valid_pairs_only(seed, T, N, form):
+    """L_regu averages over the pairs that do not cross an episode start: adding starts removes
+    exactly those pairs from both the sum and the count."""
+    from mocap_pulse.losses import temporal_regularizer
+
+    g = torch.Generator().manual_seed(seed)
+    mu = torch.randn(T, N, 3, generator=g, dtype=F64)
+    starts = torch.rand(T, N, generator=g) < 0.4
+    diff = mu[1:] - (mu[:-1] if form == "paper" else 0.99 * mu[:-1])
+    per = diff.square().sum(-1) if form == "paper" else diff.square().sum(-1).add(1e-12).sqrt()
+    valid = ~starts[1:]
+    expect = per[valid].mean() if bool(valid.any()) else torch.zeros((), dtype=F64)
+    assert torch.allclose(temporal_regularizer(mu, starts, form), expect, atol=1e-12)
