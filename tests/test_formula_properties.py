@@ -159,3 +159,34 @@ def test_cyclical_beta_peaks_exactly_at_the_ratio(ratio, cycles, beta):
         before = start + int(ratio * period * 0.5)
         assert cyclical_beta(before, total, beta, cycles, ratio) == pytest.approx(beta * ((before - start) / period) / ratio)
         assert cyclical_beta(start + period - 1, total, beta, cycles, ratio) == pytest.approx(beta)
+
+
+@SETTINGS
+@given(seed=seeds, rows=st.integers(2, 9), d=st.integers(1, 6))
+def test_vmp_kl_is_the_batch_mean_of_per_row_kls(seed, rows, d):
+    from mocap_vmp.vae import kl_divergence
+
+    g = torch.Generator().manual_seed(seed)
+    mu = torch.randn(rows, d, generator=g, dtype=F64)
+    lv = torch.empty(rows, d, dtype=F64).uniform_(-3, 2, generator=g)
+    per_row = [0.5 * float((mu[i] ** 2 + lv[i].exp() - lv[i] - 1).sum()) for i in range(rows)]
+    assert float(kl_divergence(mu, lv)) == pytest.approx(sum(per_row) / rows, rel=1e-12)
+
+
+def test_vmp_vae_samples_with_std_exp_half_logvar(monkeypatch):
+    """forward(sample=True) draws z = mu + exp(logvar / 2) eps: the sample moments match (4000 draws)."""
+    from mocap_vmp.vae import MotionVAE
+
+    torch.manual_seed(0)
+    vae = MotionVAE(feature_dim=4, window=8, latent_dim=3, channels=8, res_blocks=1, downsample=1)
+    x = torch.randn(1, 8, 4).expand(4000, 8, 4).contiguous()
+    seen: list[torch.Tensor] = []
+    monkeypatch.setattr(vae, "decode", lambda z: seen.append(z.detach()) or torch.zeros(z.shape[0], 8, 4))
+    with torch.no_grad():
+        _, mu, logvar = vae(x, sample=True)
+    z = seen[0]
+    torch.testing.assert_close(z.mean(0), mu[0], atol=0.1 * float(torch.exp(0.5 * logvar[0]).max()), rtol=0)
+    torch.testing.assert_close(z.std(0), torch.exp(0.5 * logvar[0]), rtol=0.08, atol=0)
+    with torch.no_grad():
+        vae(x[:2], sample=False)
+    torch.testing.assert_close(seen[1], mu[:2])
