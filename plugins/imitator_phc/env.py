@@ -74,6 +74,7 @@ from mocap.pd_actions import ActionMap, pd_offset_scale
 from mocap.observations import imitation_goal_dim, proprioception_and_goal, proprioception_dim
 from mocap.rl.env import StepResult
 from mocap.skeleton import Skeleton
+from mocap.start_sampling import AdaptiveStartSampler
 from mocap.state import HUMANOID_FIELDS, HumanoidState, MotionFrames, Observations, SimState
 from mocap_phc.amp import AMPHistory, AMPObservation, DiscriminatorTrainer, demo_windows, loss_config, window_frames
 from mocap.imitation_rewards import ImitationReward, energy_penalty
@@ -220,6 +221,8 @@ class ImitationEnv:
         if p.control_grid:  # the reference at t0 + k dt becomes a table lookup (start times on the grid)
             lib.use_control_grid(self.dt, p.episode_steps + 2)
         self._durations = lib.durations.to(dev, torch.float64)
+        ss = p.start_sampling
+        self.start_sampler = AdaptiveStartSampler(self._durations, ss) if ss.mode == "adaptive" else None
         self._loops = lib.loops.to(dev)
         self._ref_next: MotionFrames | None = None
         self._seen_next: MotionFrames | None = None  # what the policy observed of it (noisy references)
@@ -302,6 +305,8 @@ class ImitationEnv:
         clips, times = self.library.sample(n, generator=self._gen)
         clips = clips.to(self.device)
         t0 = times.to(self.device, torch.float64)
+        if self.start_sampler is not None:  # failure-driven start times within the clip (mocap.start_sampling)
+            t0 = self.start_sampler.sample_times(clips, self._gen).to(self.device)
         dur = self._durations[clips]
         latest = torch.where(self._loops[clips], dur, (dur - self.dt).clamp_min(0.0))
         t0 = torch.minimum(t0, latest)
@@ -426,6 +431,10 @@ class ImitationEnv:
                 "success": truncated[ids].float().cpu(),
             }
             self._record(self.clip_ids[ids].cpu(), terminated[ids].cpu())
+            if self.start_sampler is not None:
+                failed = ids[terminated[ids]]
+                fail_t = self.start_time[failed] + self.progress[failed].to(torch.float64) * self.dt
+                self.start_sampler.record_failures(self.clip_ids[failed], fail_t)
             self._reset_envs(ids)
             obs = final_obs.clone()
             obs[ids] = self._observe(self.sim.state, ids)
@@ -591,6 +600,7 @@ class ImitationEnv:
             "root_dist": self.root_dist.cpu().clone(),
             "noise_draw": self._noise_draw,
             "noise_due": self._noise_due,
+            **(self.start_sampler.state_dict() if self.start_sampler is not None else {}),
             **self.failures.state_dict(),
         }
         if self.amp_trainer is not None:
@@ -621,6 +631,8 @@ class ImitationEnv:
         if "root_dist" in state:
             self.root_dist = state["root_dist"].to(dev).clone()
         self._noise_due = bool(state.get("noise_due", False))
+        if self.start_sampler is not None:
+            self.start_sampler.load_state_dict(state)
         if int(state.get("noise_draw", 0)) != self._noise_draw:
             self._noise_draw = int(state.get("noise_draw", 0))
             self._draw_noise()

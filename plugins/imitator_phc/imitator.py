@@ -25,6 +25,7 @@ from mocap.skeleton import Skeleton
 from mocap_phc.env import ActionMap, ImitationEnv, PHCObservation, PolicyImitator
 from mocap_phc.recovery import FailStateParams, RecoveryGoalParams
 from mocap.imitation_rewards import DEFAULT_SCALES, DEFAULT_WEIGHTS
+from mocap.start_sampling import StartSamplingParams
 
 
 class PHCParams(BaseModel):
@@ -96,6 +97,11 @@ class PHCParams(BaseModel):
     )
     # ---------------------------------------------------------------------------- episodes
     episode_steps: int = Field(300, ge=1, description="time limit in control steps ([C] 300 = 10 s at 30 Hz); truncation, bootstrapped")
+    start_sampling: StartSamplingParams = Field(
+        default_factory=StartSamplingParams,
+        description="where in a clip episodes start: 'uniform' (DeepMimic / PHC RSI) or 'adaptive' (failure-driven time bins, "
+        "BeyondMimic; mocap.start_sampling)",
+    )
     control_grid: bool = Field(
         True,
         description="episode start times on the control-rate grid (t0 = j dt, j uniform over the clip's grid times) and the "
