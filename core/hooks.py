@@ -63,7 +63,12 @@ def register_latent_spaces(register: Register) -> None:
 
 @hookspec
 def register_tasks(register: Register) -> None:
-    """Register downstream tasks: ``factory(params, *, skeleton, checkpoint, device) -> Task``."""
+    """Register downstream tasks: ``factory(params, *, skeleton, num_envs, device) -> Task``.
+
+    A task that follows a reference motion (tracking, in-betweening) also declares a keyword
+    ``motions``: the task stage then passes the env's :class:`~mocap.motion.library.MotionLibrary`.
+    Accept and ignore other keywords (``**_``) so that later framework versions can add some.
+    """
 
 
 @hookspec

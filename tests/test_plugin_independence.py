@@ -61,3 +61,23 @@ def test_core_never_imports_a_plugin():
             mods = [a.name for a in node.names] if isinstance(node, ast.Import) else [node.module or ""] if isinstance(node, ast.ImportFrom) else []
             for m in mods:
                 assert m.split(".")[0] not in packages, f"{path.relative_to(REPO)} imports {m}"
+
+
+def test_every_built_in_task_factory_takes_the_documented_signature(amp):
+    """register_tasks' docstring is the contract: factory(params, *, skeleton, num_envs, device[, motions])."""
+    import inspect
+
+    from mocap.motion.deepmimic import DeepMimicParams, DeepMimicSource
+    from mocap.motion.library import MotionLibrary
+    from mocap.plugins import get_plugins
+
+    plugins = get_plugins()
+    lib = MotionLibrary(DeepMimicSource(DeepMimicParams(clips=["walk", "kick"])).load(amp), amp)
+    names = plugins.names("task")
+    assert {"speed", "reach", "strike", "vr_tracking", "motion_tracking"} <= set(names)
+    for name in names:
+        comp = plugins.get("task", name)
+        accepts_motions = "motions" in inspect.signature(comp.factory).parameters
+        extra = {"motions": lib} if accepts_motions else {}
+        task = comp.build(comp.validate_params({}), skeleton=amp, num_envs=2, device="cpu", **extra)
+        assert task is not None, name
