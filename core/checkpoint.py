@@ -196,13 +196,8 @@ def load_checkpoint(
 def _refused_global(exc: BaseException) -> str | None:
     """The global a restricted (``weights_only``) load refused, e.g. ``numpy._core.multiarray._reconstruct``
     (None when ``exc`` is another failure: a corrupt or truncated file)."""
-    text = str(exc)
-    m = re.search(r"(?:Unsupported global: GLOBAL|Unsupported operand|Trying to load unsupported object)\s*([\w.]*)", text)
-    if m:
-        return m.group(1) or "an object"
-    if "weights_only" in text.lower() and "unsupported" in text.lower():
-        return "an object"
-    return None
+    m = re.search(r"Unsupported global: GLOBAL ([\w.]+)", str(exc))
+    return m.group(1) if m else None
 
 
 def _to_safe(obj: Any) -> Any:

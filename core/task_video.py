@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 import torch
+from mocap.errors import UserError
 from mocap.runfiles import read_spec_file, read_stages
 
 
@@ -30,7 +31,7 @@ def task_stage(run_dir: Path) -> dict[str, Any] | None:
         return None
     try:
         stages = read_stages(stages_file)
-    except (OSError, ValueError):
+    except (OSError, ValueError, UserError):  # not a (readable) run record: not a task run
         return None
     return next((s for s in stages if isinstance(s, dict) and s.get("stage") == "task"), None)
 
