@@ -92,13 +92,15 @@ def test_parallel_cells_train_a_shared_stage_once(tmp_path: Path):
     runner = (
         "import sys; sys.path.insert(0, {tests!r})\n"
         "from toy_plugins import toy\nfrom mocap.testing import use_plugins\nfrom mocap.cli import main\n"
-        "with use_plugins(('toy', toy)):\n    sys.exit(main(['run', {spec!r}, '--out', {out!r}]))\n"
+        "with use_plugins(('toy', toy)):\n    sys.exit(main(['run', {spec!r}, '--out', {out!r}, '--store', {store!r}]))\n"
     )
     procs = []
-    out = tmp_path / "runs" / "cmp"
-    # each process runs the whole matrix sequentially; together they race on every stage
-    for _ in range(2):
-        code = runner.format(tests=str(Path(__file__).parent), spec=str(spec), out=str(out))
+    store = tmp_path / "runs" / "artifacts"
+    # each process runs the whole matrix sequentially into its own run directory (one run per run
+    # directory: a second run into the same one is refused) and the two race on every shared stage
+    for i in range(2):
+        out = tmp_path / "runs" / f"cmp{i}"
+        code = runner.format(tests=str(Path(__file__).parent), spec=str(spec), out=str(out), store=str(store))
         procs.append(subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env={**os.environ, "OMP_NUM_THREADS": "1"}))
     outputs = [p.communicate(timeout=300)[0].decode() for p in procs]
     assert all(p.returncode == 0 for p in procs), outputs
