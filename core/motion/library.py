@@ -57,7 +57,7 @@ from mocap.motion.clip import Clip, MotionDataError
 from mocap.motion.sources import MotionSet, check_clip_skeleton
 from mocap.rotations import angular_velocity, heading_angle, quat_mul, quat_slerp
 from mocap.skeleton import Skeleton
-from mocap.state import MotionFrames
+from mocap.state import HUMANOID_FIELDS, MotionFrames
 
 
 @dataclass(frozen=True)
@@ -483,19 +483,7 @@ def grid_start_times(t0: Tensor, durations: Tensor, loops: Tensor, dt: float) ->
 
 
 #: MotionFrames fields a control grid stores (times: the wrapped clip time)
-GRID_FIELDS: tuple[str, ...] = (
-    "root_pos",
-    "root_rot",
-    "root_lin_vel",
-    "root_ang_vel",
-    "dof_pos",
-    "dof_vel",
-    "body_pos",
-    "body_rot",
-    "body_lin_vel",
-    "body_ang_vel",
-    "times",
-)
+GRID_FIELDS: tuple[str, ...] = (*HUMANOID_FIELDS, "times")
 
 
 @dataclass
