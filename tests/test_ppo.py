@@ -16,7 +16,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from rich.console import Console
 
-from mocap.checkpoint import load_checkpoint
+from mocap.checkpoint import CheckpointError, load_checkpoint
 from mocap.hooks import hookimpl
 from mocap.interfaces import Box, MultiDiscrete
 from mocap.rl.env import StepResult, VecEnv
@@ -412,6 +412,32 @@ def test_ppo_learns_multi_discrete_point_env(tmp_path: Path):
     assert returns[-1] > returns[0] + 5 and returns[-1] > -5, (returns[0], returns[-1])
 
 
+def test_init_policy_continues_a_trained_policy(tmp_path: Path):
+    """``init_policy``: a fresh stage starts from a committed policy's weights and normalizers (its
+    first iteration already scores like the trained policy), ``init_log_std`` resets σ, and a policy
+    of another width is refused with the differing tensor named."""
+    trained = _train(tmp_path / "a", small_params())
+    learned = episode_returns(tmp_path / "a")[-1]
+    src = load_policy(trained.checkpoint)
+    cont = small_params(total_env_steps=32 * 32, init_policy=trained.checkpoint, init_log_std=-3.0)
+    _train(tmp_path / "b", cont)
+    first = episode_returns(tmp_path / "b")[0]
+    assert first > -5 and first > episode_returns(tmp_path / "a")[0] + 5, (first, learned)
+    ck = load_checkpoint(tmp_path / "b" / "ppo.pt")
+    assert torch.equal(ck["model"]["obs_norm.count"], src.state_dict()["obs_norm.count"] + 32 * 32)  # continued stats
+    fresh = PPOTrainer(cont).build_model(src.obs_dim, Box((src.action_dim,), -1.0, 1.0))
+    from mocap.rl.networks import init_from_policy
+
+    init_from_policy(fresh, trained.checkpoint, -3.0)
+    assert torch.equal(fresh.log_std.detach(), torch.full_like(fresh.log_std, -3.0))
+    assert torch.equal(fresh.actor_body[0].weight, src.actor_body[0].weight)
+    wide = PPOTrainer(small_params(actor_hidden=[8])).build_model(src.obs_dim, Box((src.action_dim,), -1.0, 1.0))
+    with pytest.raises(CheckpointError, match="actor_body"):
+        init_from_policy(wide, trained.checkpoint)
+    with pytest.raises(ValueError, match="init_log_std needs init_policy"):
+        small_params(init_log_std=-3.0)
+
+
 def test_resume_with_a_constant_schedule_uses_the_specs_rate(tmp_path: Path):
     """A run trained with the adaptive rule, continued with ``lr_schedule: constant``: the optimizer
     runs at the spec's lr, not at the adapted rate saved in the checkpoint."""
@@ -549,7 +575,7 @@ task:
 
 def test_export_policy_from_a_training_checkpoint(tmp_path):
     """``export_policy`` turns a resumable trainer checkpoint into a policy file with the same weights."""
-    from mocap.checkpoint import load_checkpoint, save_checkpoint
+    from mocap.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
     from mocap.rl.networks import ActorCritic, export_policy, load_policy
 
     model = ActorCritic(5, Box((2,)), [8], [8])

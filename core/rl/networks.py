@@ -291,6 +291,34 @@ def load_policy(path: Path, map_location: str | torch.device = "cpu") -> ActorCr
     return model.to(map_location).eval()
 
 
+def init_from_policy(model: ActorCritic, source: Path, log_std: float | None = None) -> None:
+    """Copy the weights and normalizers of the policy file ``source`` into ``model`` (a fresh network
+    of the same architecture): PPO's ``init_policy`` (continue training a committed policy).
+
+    ``log_std``: set the Gaussian head's ``log σ`` to this value instead of the source's (e.g. a
+    fixed exploration σ). A policy of another architecture (observation or action size, hidden
+    widths, normalizers) raises :class:`~mocap.checkpoint.CheckpointError` naming the tensors.
+    """
+    source = Path(source)
+    if not source.is_file():
+        raise CheckpointError(f"{source}: init_policy does not exist")
+    src = load_policy(source)
+    got = {k: tuple(v.shape) for k, v in src.state_dict().items() if isinstance(v, Tensor)}
+    want = {k: tuple(v.shape) for k, v in model.state_dict().items() if isinstance(v, Tensor)}
+    if got != want:
+        bad = sorted(k for k in set(got) | set(want) if got.get(k) != want.get(k))[:3]
+        raise CheckpointError(
+            f"{source}: init_policy does not fit this network (observation {model.obs_dim}, actions "
+            f"{model.action_dim}); differing tensors: {', '.join(bad)}"
+        )
+    model.load_state_dict(src.state_dict())
+    if log_std is not None:
+        if model.log_std is None:
+            raise CheckpointError(f"{source}: init log σ given, but the network has no Gaussian head")
+        with torch.no_grad():
+            model.log_std.fill_(float(log_std))
+
+
 def export_policy(source: Path, destination: Path, extra: dict[str, Any] | None = None) -> None:
     """Write the policy inside ``source`` (a policy file or a trainer's resumable checkpoint such as
     ``ppo.pt``) as a self-contained policy file: network config, weights, normalizers and the spec
@@ -301,4 +329,4 @@ def export_policy(source: Path, destination: Path, extra: dict[str, Any] | None 
     save_policy(Path(destination), model, extra={**info, **(extra or {})}, spec_yaml=data.get("spec"))
 
 
-__all__ = ["ACTIVATIONS", "ActorCritic", "TrainOutput", "export_policy", "load_policy", "mlp", "save_policy"]
+__all__ = ["ACTIVATIONS", "ActorCritic", "TrainOutput", "export_policy", "init_from_policy", "load_policy", "mlp", "save_policy"]

@@ -42,7 +42,7 @@ from mocap.checkpoint import load_checkpoint, save_checkpoint
 from mocap.faults import FaultGuard
 from mocap.interfaces import Box, MultiDiscrete, StageResult, Trainer
 from mocap.progress import IterationProgress
-from mocap.rl.networks import ActorCritic, save_policy
+from mocap.rl.networks import ActorCritic, init_from_policy, save_policy
 from mocap.rng import rng_state, set_rng_state
 from mocap.bounds import EnvCount, LayerWidth, LearningRate, LogStd, ThreadCount
 
@@ -200,6 +200,14 @@ class PPOParams(BaseModel):
         "2-core machine 2 threads make the update about 1.75x faster, but under contention they were several times "
         "slower than 1 (30x in design/FEASIBILITY.md §3)",
     )
+    init_policy: Path | None = Field(
+        None,
+        description="start from this policy file's weights and normalizers instead of random ones (relative to the "
+        "spec file; same architecture). Used only when the stage has no ppo.pt yet; the budget counts this stage's steps",
+    )
+    init_log_std: LogStd | None = Field(
+        None, description="with init_policy: reset log σ to this value (e.g. a fixed σ); None keeps the policy's σ"
+    )
     checkpoint_every: int = Field(10, ge=1, description="iterations between checkpoints (also saved at the end and on Ctrl-C)")
     print_every: int = Field(10, ge=1, description="iterations between progress lines when the console is not a terminal")
 
@@ -209,6 +217,8 @@ class PPOParams(BaseModel):
             raise ValueError(
                 f"minibatch_size {self.minibatch_size} exceeds the batch num_envs × horizon = {self.num_envs * self.horizon}"
             )
+        if self.init_log_std is not None and self.init_policy is None:
+            raise ValueError("init_log_std needs init_policy (log_std_init sets the σ of a fresh network)")
         return self
 
     @property
@@ -263,6 +273,10 @@ class PPOTrainer(Trainer):
             raise ValueError(f"the env has {env.num_envs} envs, PPO asked for {p.num_envs}")
         space = env.action_space
         model = self.build_model(env.obs_dim, space).to(device)
+        fresh = not ckpt_path.is_file()
+        if fresh and p.init_policy is not None:
+            init_from_policy(model, p.init_policy, p.init_log_std)
+            ctx.console.print(f"ppo: starting from {p.init_policy}")
         parallel, world = dist.active(), dist.world_size()
         dist.broadcast_module(model)  # data-parallel: every rank starts from rank 0's weights
         optimizer = torch.optim.Adam([q for q in model.parameters() if q.requires_grad], lr=p.lr)
@@ -298,7 +312,7 @@ class PPOTrainer(Trainer):
         else:
             ctx.log.truncate_after(0)  # lines from a run that crashed before its first checkpoint
             obs = env.reset().to(device)
-            if p.normalize_obs:  # first statistics from the initial states (of all ranks)
+            if p.normalize_obs and p.init_policy is None:  # first statistics from the initial states (of all ranks)
                 dist.sync_normalizers(model.obs_norm, lambda: model.obs_norm.update(obs))
         # the budget counts every rank's samples; alone this is p.iterations
         iterations = iteration + max(0, math.ceil((p.total_env_steps - env_steps) / (p.batch_size * world)))
