@@ -80,13 +80,13 @@ def _load(spec_path: Path, overrides: list[str] | None):  # -> ResolvedSpec
 
 def cmd_validate(spec: Annotated[Path, typer.Argument(help="spec YAML file")], set_: SetOption = None) -> None:
     """Check a spec (structure, plugin names, every component's params) without running it."""
-    from mocap.pipeline import stage_keys
+    from mocap.pipeline import resolved_stage_keys
 
     from mocap.matrix import load_cells
 
     cells = load_cells(spec, _plugins(), set_ or [])
     for cell, resolved in cells:
-        keys = stage_keys(resolved.spec)
+        keys = resolved_stage_keys(resolved, _plugins())
         stages = ", ".join(f"{s} ({k})" for s, k in keys.items()) or "none"
         what = f"cell {cell.name} of {spec}" if cell.name else str(spec)
         console.print(f"[green]ok[/]: {what} is a valid spec {resolved.spec.name!r}; stages: {stages}", highlight=False)

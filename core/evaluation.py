@@ -596,9 +596,9 @@ def load_evaluation_target(target: Path, plugins: Any) -> EvalTarget:
                     found[stage["stage"]] = Path(stage["checkpoint"])
             if resolved.spec.imitator is None and "latent" not in found:
                 raise UserError(f"{spec_file}: the run has no imitator or trained latent stage to evaluate")
-            from mocap.pipeline import stage_keys
+            from mocap.pipeline import resolved_stage_keys
 
-            keys = stage_keys(resolved.spec)
+            keys = resolved_stage_keys(resolved, plugins)
             for stage in ("imitator", "latent"):
                 section = getattr(resolved.spec, stage, None)
                 if section is not None and section.trainer is not None and stage not in found:

@@ -229,6 +229,13 @@ class MotionSource(ABC):
     def load(self, skeleton: Skeleton) -> Any:
         """Return a ``MotionSet`` of clips on ``skeleton`` (bad files skipped and listed, or an error)."""
 
+    def inputs(self) -> list[Path]:
+        """The files :meth:`load` reads. The pipeline fingerprints their contents into every stage's
+        artifact key (:func:`mocap.fingerprint.files_fingerprint`), so a clip edited in place is
+        trained on again instead of being served from a stale stage. Default: none (the spec's
+        params alone identify the data, e.g. clips generated from the params)."""
+        return []
+
 
 # ------------------------------------------------------------------------------------- metrics
 class Metric(ABC):

@@ -38,8 +38,10 @@ from rich.console import Console
 
 from mocap import distributed as dist
 from mocap.checkpoint import atomic_write_json, atomic_write_text, hardware, package_versions
-from mocap.interfaces import StageResult
-from mocap.plugins import PluginSet
+from mocap.interfaces import MotionSource, StageResult
+from mocap.fingerprint import file_digest, files_fingerprint
+from mocap.motion.clip import MotionDataError
+from mocap.plugins import PluginError, PluginSet, UnknownComponent
 from mocap.runlog import MetricsLogger
 from mocap.skeleton import Skeleton
 from mocap.spec import STAGES, ResolvedSpec, Spec
@@ -64,18 +66,16 @@ def _canonical(data: Any) -> str:
     return json.dumps(data, sort_keys=True, separators=(",", ":"), default=str)
 
 
-def _file_digest(path: Path) -> str:
-    h = hashlib.sha256()
-    with path.open("rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
+def stage_keys(spec: Spec, motion_inputs: str | None = None) -> dict[str, str]:
+    """Artifact key of every stage the spec names (same spec -> same keys).
 
-
-def stage_keys(spec: Spec) -> dict[str, str]:
-    """Artifact key of every stage the spec names (same spec -> same keys)."""
+    ``motion_inputs``: the fingerprint of the motion files (:func:`motion_fingerprint`); it enters
+    every trained stage's key, so a clip edited in place trains the stages again.
+    """
     dumped = spec.model_dump(mode="json")
     context = {name: dumped[name] for name in _CONTEXT_SECTIONS}
+    if motion_inputs is not None:
+        context["motion_inputs"] = motion_inputs
     keys: dict[str, str] = {}
     upstream: list[str] = []
     for stage in STAGES:
@@ -85,7 +85,7 @@ def stage_keys(spec: Spec) -> dict[str, str]:
         ckpt = section.get("checkpoint") if isinstance(section, dict) else None
         if ckpt:
             path = Path(ckpt)
-            content = _file_digest(path) if _is_file(path) else f"missing:{path}"
+            content = file_digest(path) if _is_file(path) else f"missing:{path}"
             material = {"format": ARTIFACT_FORMAT, "stage": stage, "name": section["name"], "checkpoint": content}
         else:
             material = {"format": ARTIFACT_FORMAT, "stage": stage, "section": section, "context": context, "upstream": upstream}
@@ -93,6 +93,29 @@ def stage_keys(spec: Spec) -> dict[str, str]:
         keys[stage] = key
         upstream = [*upstream, key]
     return keys
+
+
+def motion_fingerprint(resolved: ResolvedSpec, plugins: PluginSet) -> str | None:
+    """Fingerprint of the files the spec's motion source reads (:meth:`MotionSource.inputs`); None
+    when the source cannot even list them (its own error comes when the motions are loaded)."""
+    spec = resolved.spec
+    try:
+        source = plugins.get("motion_source", spec.motions.name).build(resolved.params.get("motions"))
+    except (UnknownComponent, MotionDataError, OSError, ValueError):
+        return None
+    if not isinstance(source, MotionSource):
+        raise PluginError(
+            f"motion source {spec.motions.name!r} built a {type(source).__name__}, not a mocap.interfaces.MotionSource"
+        )
+    try:
+        return files_fingerprint(source.inputs())
+    except (MotionDataError, OSError, ValueError):
+        return None
+
+
+def resolved_stage_keys(resolved: ResolvedSpec, plugins: PluginSet) -> dict[str, str]:
+    """:func:`stage_keys` with the motion files' fingerprint: the keys every command uses."""
+    return stage_keys(resolved.spec, motion_fingerprint(resolved, plugins))
 
 
 def _is_file(path: Path) -> bool:
@@ -315,7 +338,7 @@ def _run_pipeline_locked(
     device = dist.init(resolve_device(spec.device))  # under torchrun: join the group; this rank's device
     if dist.world_size() > 1:
         console.print(f"data-parallel: {dist.world_size()} processes ({device.type}); rank 0 writes {out_dir}", highlight=False)
-    keys = stage_keys(spec)
+    keys = resolved_stage_keys(resolved, plugins)
     records: list[StageRecord] = []
     upstream: dict[str, StageResult] = {}
     started = time.time()

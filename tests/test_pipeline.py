@@ -10,7 +10,7 @@ from rich.console import Console
 from toy_plugins import TOY_SPEC, CountTrainer, toy
 
 from mocap.checkpoint import save_checkpoint
-from mocap.pipeline import PipelineInterrupted, run_pipeline, stage_keys
+from mocap.pipeline import PipelineInterrupted, resolved_stage_keys, run_pipeline, stage_keys
 from mocap.plugins import load_plugins
 from mocap.spec import load_spec_text
 
@@ -76,7 +76,7 @@ def test_interrupt_then_rerun_resumes_and_finishes(tmp_path: Path):
     # the same command by reusing the same resolved spec after the interruption.
     with pytest.raises(PipelineInterrupted):
         run_pipeline(spec, PSET, out, console=quiet())
-    keys = stage_keys(spec.spec)
+    keys = resolved_stage_keys(spec, PSET)
     workdir = tmp_path / "runs" / "artifacts" / f"imitator-{keys['imitator']}"
     assert (workdir / "checkpoint.pt").is_file() and not (workdir / "DONE.json").exists()
     with pytest.raises(PipelineInterrupted):  # resumes at 2, runs 3 and 4, interrupted again
@@ -154,3 +154,32 @@ def test_a_stage_that_fails_before_any_output_leaves_no_empty_artifact_folder(tm
         run_pipeline(resolve(), PSET, out, console=quiet())
     store = tmp_path / "runs" / "artifacts"
     assert not [p for p in store.iterdir() if p.is_dir()], list(store.iterdir())
+
+
+def test_editing_a_motion_file_in_place_changes_every_trained_stage_key(tmp_path: Path):
+    """The artifact keys fingerprint the motion files, not only the spec: a clip edited in place is
+    not served from a stage trained on the old clip, and the same bytes give the same keys again."""
+    from mocap.motion.deepmimic import default_data_dir
+    from mocap.plugins import get_plugins
+    from mocap.spec import load_spec
+
+    plugins = get_plugins()
+    root = Path(__file__).resolve().parents[1]
+    data = tmp_path / "motions"
+    data.mkdir()
+    for clip in ("walk", "run"):
+        name = f"humanoid3d_{clip}.txt"
+        (data / name).write_bytes((default_data_dir() / name).read_bytes())
+    sets = [f"motions.params.data_dir={data}", "motions.params.clips=[walk, run]"]
+
+    def keys() -> dict[str, str]:
+        return resolved_stage_keys(load_spec(root / "specs" / "imitator" / "amp_bundled.yaml", plugins, sets), plugins)
+
+    before = keys()
+    assert keys() == before
+    walk = data / "humanoid3d_walk.txt"
+    walk.write_text(walk.read_text().replace('"Loop"', '"Loop" ', 1))  # one byte more, same clip semantics
+    after = keys()
+    assert after["imitator"] != before["imitator"] and after["eval"] != before["eval"]
+    walk.write_text(walk.read_text().replace('"Loop" ', '"Loop"', 1))
+    assert keys() == before  # by content, not by modification time

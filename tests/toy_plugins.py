@@ -5,12 +5,13 @@ from __future__ import annotations
 import os
 import signal
 from pathlib import Path
+from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
 from mocap.checkpoint import load_checkpoint, save_checkpoint
 from mocap.hooks import hookimpl
-from mocap.interfaces import StageResult, Trainer
+from mocap.interfaces import MotionSource, StageResult, Trainer
 
 
 class Optim(BaseModel):
@@ -63,6 +64,16 @@ class ToyComponent:
         self.kwargs = kwargs
 
 
+class ToyMotions(MotionSource):
+    """A motion source that reads no files (the pipeline only fingerprints its inputs)."""
+
+    def __init__(self, **kwargs: Any):
+        self.kwargs = kwargs
+
+    def load(self, skeleton: Any) -> Any:
+        raise NotImplementedError("the toy pipeline never loads motions")
+
+
 class toy:  # a plugin object (pluggy accepts any object with hookimpl-marked attributes)
     @staticmethod
     @hookimpl
@@ -72,7 +83,7 @@ class toy:  # a plugin object (pluggy accepts any object with hookimpl-marked at
     @staticmethod
     @hookimpl
     def register_motion_sources(register):
-        register("toy_motions", ToyComponent, description="no params")
+        register("toy_motions", ToyMotions, description="no params")
 
     @staticmethod
     @hookimpl

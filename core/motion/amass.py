@@ -198,6 +198,9 @@ class AmassSource(MotionSource):
     def __init__(self, params: AmassParams):
         self.params = params
 
+    def inputs(self) -> list[Path]:
+        return [path for path, _ in expand_paths(self.params.paths, ".npz", ignore=lambda f: f.name == "shape.npz")]
+
     def load(self, skeleton: Skeleton) -> MotionSet:
         body_map(skeleton, "amass")
         p = self.params

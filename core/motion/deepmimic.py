@@ -297,6 +297,9 @@ class DeepMimicSource(MotionSource):
                 )
         return out
 
+    def inputs(self) -> list[Path]:
+        return [path for path, _ in self.files()]
+
     def load(self, skeleton: Skeleton) -> MotionSet:
         check_skeleton(skeleton, f"deepmimic ({self.data_dir})")
         return load_each(

@@ -165,6 +165,9 @@ class NpzSource(MotionSource):
                 continue
         return None
 
+    def inputs(self) -> list[Path]:
+        return [path for path, _ in expand_paths(self.params.paths, ".npz")]
+
     def load(self, skeleton: Skeleton) -> MotionSet:
         def one(path: Path, name: str) -> Clip:
             clip = Clip.load(path)
