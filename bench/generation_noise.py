@@ -101,7 +101,10 @@ def main() -> None:
         loaded = load(ck)
         for s in args.noise:
             r = run_one(loaded, ck, s, args.rollouts, args.seconds, args.seed)
-            print(f"{ck} noise {s:g}: fall {r['fall_rate']:.3f} after {r['time_to_fall_s']:.2f} s, diversity {r['diversity_m']:.2f} m, match {r['match_distance']:.1f}")
+            print(
+                f"{ck} noise {s:g}: fall {r['fall_rate']:.3f} after {r['time_to_fall_s']:.2f} s, "
+                f"diversity {r['diversity_m']:.2f} m, match {r['match_distance']:.1f}"
+            )
             records.append({k: v for k, v in r.items() if k != "video"})
     args.out.parent.mkdir(parents=True, exist_ok=True)
     out = {

@@ -144,7 +144,10 @@ def collect(args: argparse.Namespace) -> int:
         f = g["final"]
         nr = f.get("episode/normalized_return", {})
         ln = f.get("episode/length", {})
-        print(f"{name:24s} seeds {len(g['seeds'])}  normalized return {nr.get('mean', float('nan')):.3f} ± {nr.get('std', 0):.3f}  length {ln.get('mean', float('nan')):.1f}")
+        print(
+            f"{name:24s} seeds {len(g['seeds'])}  normalized return {nr.get('mean', float('nan')):.3f} ± {nr.get('std', 0):.3f}  "
+            f"length {ln.get('mean', float('nan')):.1f}"
+        )
     return 0
 
 

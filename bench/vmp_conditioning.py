@@ -80,8 +80,18 @@ def plot(result: dict, out: Path) -> None:
     x = list(range(len(names)))
     fig, axes = plt.subplots(1, 2, figsize=(13, 4.2), sharey=True)
     panels = (
-        ("own tracked frames", {k: [result[k]["clips"][n]["joint_mae_deg"] for n in names] for k in ("LM", "M")}, result["LM"]["joint_mae_deg"], result["M"]["joint_mae_deg"]),
-        ("frames both track", {k: [result["equal_frames"]["clips"][n][k] for n in names] for k in ("LM", "M")}, result["equal_frames"]["LM"], result["equal_frames"]["M"]),
+        (
+            "own tracked frames",
+            {k: [result[k]["clips"][n]["joint_mae_deg"] for n in names] for k in ("LM", "M")},
+            result["LM"]["joint_mae_deg"],
+            result["M"]["joint_mae_deg"],
+        ),
+        (
+            "frames both track",
+            {k: [result["equal_frames"]["clips"][n][k] for n in names] for k in ("LM", "M")},
+            result["equal_frames"]["LM"],
+            result["equal_frames"]["M"],
+        ),
     )
     for ax, (title, vals, mean_lm, mean_m) in zip(axes, panels):
         for off, key, color in ((-0.2, "LM", "tab:blue"), (0.2, "M", "tab:orange")):
@@ -131,7 +141,10 @@ def evaluate(target: Path) -> tuple[dict, object]:
         "mpjpe_g": agg["mpjpe_g"],
         "tracked_s": agg.get("tracked_s"),
         "latent_metrics": label,
-        "clips": {name: {"success": row["success"], "joint_mae_deg": row["joint_mae"], "mpjpe_g": row["mpjpe_g"], "tracked_s": row.get("tracked_s")} for name, row in table["clips"].items()},
+        "clips": {
+            name: {"success": row["success"], "joint_mae_deg": row["joint_mae"], "mpjpe_g": row["mpjpe_g"], "tracked_s": row.get("tracked_s")}
+            for name, row in table["clips"].items()
+        },
     }, loaded
 
 

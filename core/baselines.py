@@ -13,7 +13,7 @@ class PDReplay(Imitator):
 
     What the simulator does with the raw reference: the humanoid follows the clip's joint angles
     but nothing keeps its root on track, so it falls within about a second on most clips
-    (FEASIBILITY.md measured ~26 steps on walk). It is the floor any imitator must beat.
+    (measured here: ~26 steps on walk). It is the floor any imitator must beat.
     """
 
     def observe(self, state: SimState, reference: MotionFrames) -> Observations:

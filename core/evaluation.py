@@ -27,6 +27,7 @@ from rich.progress import Progress
 from mocap.baselines import PDReplay
 from mocap.paths import safe_filename
 from mocap.checkpoint import atomic_write_json, atomic_write_text
+from mocap.eval_targets import EvalTarget, LoadedTarget, build_evaluation_target, check_trained_humanoid, load_evaluation_target
 from mocap.hooks import hookimpl
 from mocap.interfaces import Imitator, Metric, Simulator, StageResult, Trainer
 from mocap.metrics import BUILTIN_METRICS, PROTOCOL, SuccessParams, _success_metric, default_metrics, make_metric
@@ -413,278 +414,6 @@ def register_imitators(register):  # type: ignore[no-untyped-def]
     register("pd_replay", _make_pd_replay, params=NoParams, description="baseline: PD targets = the next reference pose")
 
 
-@dataclass
-class EvalTarget:
-    """What ``mocap eval`` / ``mocap generate`` evaluate: a validated spec and the stage checkpoints.
-
-    ``latent_checkpoint`` is set when the target is a latent space; it is then evaluated as an
-    imitator (:class:`~mocap.latent_imitator.LatentImitator`, ``z`` = encoder mean) on top of the
-    imitator it was distilled from (``imitator_checkpoint``).
-    """
-
-    resolved: Any
-    imitator_checkpoint: Path | None
-    latent_checkpoint: Path | None = None
-
-    @property
-    def spec(self) -> Any:
-        return self.resolved.spec
-
-
-@dataclass
-class LoadedTarget:
-    """An :class:`EvalTarget` built: skeleton, motion library, the policy to evaluate, and the parts."""
-
-    target: EvalTarget
-    skeleton: Any
-    library: MotionLibrary
-    imitator: Imitator  # the trained imitator (the teacher, for a latent)
-    latent: Any  # the latent space, or None
-    label: str  # what the latent's decoder outputs: "policy_output" (teacher's raw output) or "pd_targets"
-    policy: Imitator  # what imitation evaluation rolls out
-    make_sim: Callable[[int], Simulator]
-
-    def to_pd_targets(self, obs: Any, output: torch.Tensor) -> torch.Tensor:
-        """PD targets from a latent decoder's output (identity for ``label: pd_targets``)."""
-        return output if self.label == "pd_targets" else self.imitator.to_pd_targets(obs, output)
-
-
-_POLICY_NAMES = ("latent.pt", "policy.pt")
-
-
-def _stage_checkpoint(spec: Any, stage: str) -> Path | None:
-    section = getattr(spec, stage, None)
-    ckpt = getattr(section, "checkpoint", None) if section is not None else None
-    return Path(ckpt) if ckpt else None
-
-
-def _from_file(target: Path, plugins: Any) -> EvalTarget:
-    from mocap.checkpoint import load_checkpoint
-    from mocap.errors import UserError
-    from mocap.spec import SpecError, load_spec, validate_document
-
-    if target.suffix in (".yaml", ".yml"):
-        try:
-            resolved = load_spec(target, plugins)
-        except SpecError as exc:
-            raise UserError(str(exc)) from None
-        return _check(EvalTarget(resolved, _stage_checkpoint(resolved.spec, "imitator"), _stage_checkpoint(resolved.spec, "latent")), target)
-    data = load_checkpoint(target)  # CheckpointError (missing, corrupt, truncated): one clear line
-    _check_known_format(target, data)
-    _warn_unfinished(target, data)
-    spec_yaml = data.get("spec") if isinstance(data, dict) else None
-    if not spec_yaml:
-        raise UserError(f"{target}: the checkpoint carries no spec; evaluate its run directory instead")
-    from mocap.export import resolve_embedded_paths
-
-    from mocap.runfiles import yaml_mapping
-
-    doc = resolve_embedded_paths(yaml_mapping(spec_yaml, f"{target} (embedded spec)"), target.parent)
-    resolved = validate_document(doc, plugins, source=f"{target} (embedded spec)")
-    from mocap.distill import CHECKPOINT_FORMAT as DISTILL_FORMAT, LATENT_FORMAT
-
-    if data.get("format") in (LATENT_FORMAT, DISTILL_FORMAT) or (resolved.spec.imitator is None and resolved.spec.latent is not None):
-        teacher = _stage_checkpoint(resolved.spec, "imitator")
-        return _check(EvalTarget(resolved, teacher, target), target)
-    return _check(EvalTarget(resolved, target), target)
-
-
-def _warn_unfinished(path: Path, data: dict[str, Any]) -> None:
-    """One ``warning:`` line when a trainer checkpoint was saved before the end of its budget (eval,
-    generate, render and export all load targets through here)."""
-    from rich.console import Console
-
-    from mocap.checkpoint import training_status
-
-    status = training_status(data)
-    if status is not None:
-        Console(stderr=True, soft_wrap=True).print(
-            f"[yellow]warning:[/] {path} is a training checkpoint still {status}; the numbers describe an unfinished policy",
-            highlight=False,
-        )
-
-
-def _check_known_format(path: Path, data: dict[str, Any]) -> None:
-    """A policy / latent / trainer checkpoint of a format version this mocap does not read: a
-    :class:`~mocap.checkpoint.CheckpointError` naming both versions (other formats pass: their
-    plugin checks them)."""
-    from mocap.checkpoint import check_format, split_format
-    from mocap.distill import CHECKPOINT_FORMAT as DISTILL_FORMAT, LATENT_FORMAT
-    from mocap.rl.networks import POLICY_FORMAT
-    from mocap.rl.ppo import CHECKPOINT_FORMAT as PPO_FORMAT
-
-    known = (POLICY_FORMAT, PPO_FORMAT, LATENT_FORMAT, DISTILL_FORMAT)
-    got = split_format(data.get("format"))
-    if got is not None and data.get("format") not in known and any(split_format(k)[0] == got[0] for k in known):  # type: ignore[index]
-        check_format(path, data, known)
-
-
-def _check(t: EvalTarget, source: Path) -> EvalTarget:
-    from mocap.errors import UserError
-
-    spec = t.spec
-    if spec.imitator is None and t.latent_checkpoint is None:
-        raise UserError(f"{source}: its spec has no imitator")
-    if t.latent_checkpoint is not None and spec.latent is None:
-        raise UserError(f"{source}: a latent checkpoint, but its spec has no latent stage")
-    if t.latent_checkpoint is not None and t.imitator_checkpoint is None and spec.imitator is not None and spec.imitator.name not in ("pd_replay",):
-        raise UserError(f"{source}: the latent's imitator has no checkpoint (the spec names none, and no run records one)")
-    for path in (t.imitator_checkpoint, t.latent_checkpoint):
-        if path is not None and not Path(path).is_file():
-            raise UserError(f"{source}: checkpoint {path} does not exist (moved? evaluate a directory holding it)")
-    return t
-
-
-def _action_count(data: dict[str, Any]) -> int | None:
-    """The number of actions of the policy in a checkpoint (policy file or PPO checkpoint), if it has one."""
-    from mocap.rl.networks import POLICY_FORMAT
-
-    config = data.get("config") if data.get("format") == POLICY_FORMAT else data.get("policy_config")
-    space = config.get("action_space") if isinstance(config, dict) else None
-    if isinstance(space, dict) and space.get("type") == "box" and space.get("shape"):
-        return int(space["shape"][0])
-    return None
-
-
-def check_trained_humanoid(path: Path, skeleton: Any, plugins: Any, stage: str = "imitator") -> None:
-    """Raise :class:`~mocap.checkpoint.CheckpointError` when the spec embedded in checkpoint ``path``
-    names another humanoid than ``skeleton``: "trained for humanoid amp with 28 actions; the spec
-    asks for smpl with 69"."""
-    from mocap.checkpoint import CheckpointError, embedded_humanoid, load_checkpoint
-
-    data = load_checkpoint(path)
-    trained = embedded_humanoid(data)
-    if trained is None or trained == skeleton.name:
-        return
-    actions = _action_count(data)
-    if actions is None:
-        try:
-            actions = plugins.get("humanoid", trained).build(None).num_dofs
-        except Exception:  # noqa: BLE001 - a humanoid this install lacks: say so without the count
-            actions = None
-    count = f" with {actions} actions" if actions is not None else ""
-    raise CheckpointError(
-        f"{path}: this {stage} checkpoint was trained for humanoid {trained}{count}; the spec asks for "
-        f"{skeleton.name} with {skeleton.num_dofs}. Use a checkpoint trained on {skeleton.name}, or set humanoid: {trained}"
-    )
-
-
-def load_evaluation_target(target: Path, plugins: Any) -> EvalTarget:
-    """The :class:`EvalTarget` of a checkpoint file, a run directory, a checkpoint directory or a spec.
-
-    * a file ``policy.pt`` / ``ppo.pt`` (imitator) or ``latent.pt`` / ``distill.pt`` (latent space):
-      its embedded spec; for a latent, the imitator checkpoint that spec names;
-    * a run directory (``spec.yaml`` + ``stages.json``): the imitator and latent stages' checkpoints
-      (the latent is evaluated when the run has one);
-    * a checkpoint directory (``checkpoints/<name>/``): its ``spec.yaml`` whose stages name their
-      ``checkpoint:`` files (relative to it), else its ``latent.pt`` or ``policy.pt``;
-    * a spec file whose imitator (and latent) stages name ``checkpoint:`` files.
-    """
-    from mocap.errors import UserError
-    from mocap.spec import SpecError, load_spec, validate_document
-
-    target = Path(target)
-    if target.is_dir():
-        spec_file, stages_file = target / "spec.yaml", target / "stages.json"
-        if stages_file.is_file() and spec_file.is_file():
-            from mocap.runfiles import read_spec_file, read_stages
-
-            resolved = validate_document(read_spec_file(spec_file), plugins, source=str(spec_file))
-            found: dict[str, Path] = {}
-            for stage in read_stages(stages_file):
-                if stage["stage"] in ("imitator", "latent") and stage.get("checkpoint"):
-                    found[stage["stage"]] = Path(stage["checkpoint"])
-            if resolved.spec.imitator is None and "latent" not in found:
-                raise UserError(f"{spec_file}: the run has no imitator or trained latent stage to evaluate")
-            from mocap.pipeline import resolved_stage_keys
-
-            keys = resolved_stage_keys(resolved, plugins)
-            for stage in ("imitator", "latent"):
-                section = getattr(resolved.spec, stage, None)
-                if section is not None and section.trainer is not None and stage not in found:
-                    partial = sorted((target.parent / "artifacts" / f"{stage}-{keys[stage]}").glob("*.pt"))
-                    hint = f"; evaluate its latest training checkpoint instead: mocap eval {partial[0]}" if partial else "; run it first"
-                    raise UserError(f"{target}: the {stage} stage has not finished (no checkpoint in stages.json){hint}")
-            return _check(EvalTarget(resolved, found.get("imitator"), found.get("latent")), target)
-        if spec_file.is_file():
-            try:
-                resolved = load_spec(spec_file, plugins)
-            except SpecError as exc:
-                raise UserError(str(exc)) from None
-            t = EvalTarget(resolved, _stage_checkpoint(resolved.spec, "imitator"), _stage_checkpoint(resolved.spec, "latent"))
-            return _check(t, target)
-        for name in _POLICY_NAMES:
-            if (target / name).is_file():
-                return _from_file(target / name, plugins)
-        raise UserError(f"{target}: not a run directory (spec.yaml + stages.json) nor a checkpoint directory ({' or '.join(_POLICY_NAMES)})")
-    if not target.is_file():
-        raise UserError(f"{target}: no such checkpoint file, spec or directory")
-    return _from_file(target, plugins)
-
-
-def _is_distilled(path: Path) -> bool:
-    """Whether a latent checkpoint is a distilled latent space (``mocap.latent`` / ``mocap.distill``
-    format, decoded through the imitator it was distilled from) rather than a latent space with a
-    policy of its own (VMP's tracker)."""
-    from mocap.checkpoint import load_checkpoint
-    from mocap.distill import CHECKPOINT_FORMAT, LATENT_FORMAT
-
-    return load_checkpoint(path).get("format") in (LATENT_FORMAT, CHECKPOINT_FORMAT)
-
-
-def build_evaluation_target(
-    target: EvalTarget, plugins: Any, *, motions: str | None = None, device: str = "cpu", use_latent: bool = True
-) -> LoadedTarget:
-    """Build the skeleton, motion library (``motions``: another source, default params), the
-    imitator, the latent space (when ``target`` has one and ``use_latent``) and the simulator factory."""
-    from mocap.distill import load_latent_state
-    from mocap.latent_imitator import PDTargetTeacher, latent_imitator
-
-    resolved, spec = target.resolved, target.spec
-    skeleton = plugins.get("humanoid", spec.humanoid.name).build(resolved.params.get("humanoid"))
-    for stage, path in (("imitator", target.imitator_checkpoint), ("latent", target.latent_checkpoint)):
-        if path is not None:  # before loading motions: a checkpoint for another humanoid fails at once
-            check_trained_humanoid(Path(path), skeleton, plugins, stage)
-    if motions is None:
-        source = plugins.get("motion_source", spec.motions.name).build(resolved.params.get("motions"))
-    else:
-        source = plugins.get("motion_source", motions).build({})
-    lib = MotionLibrary(source.load(skeleton), skeleton)
-    sim_component = plugins.get("simulator", spec.simulator.name)
-    sim_params = resolved.params.get("simulator")
-
-    def make_sim(n: int) -> Simulator:
-        return sim_component.build(sim_params, skeleton=skeleton, num_envs=n, seed=spec.seed)
-
-    own_tracker = spec.imitator is None or (
-        use_latent and target.latent_checkpoint is not None and not _is_distilled(Path(target.latent_checkpoint))
-    )
-    if own_tracker:  # a latent space that imitates on its own (VMP's tracker), even where the spec names an imitator
-        from mocap.errors import UserError
-
-        latent = plugins.get("latent", spec.latent.name).build(
-            resolved.params.get("latent"), skeleton=skeleton, checkpoint=target.latent_checkpoint, device=device
-        )
-        probe = make_sim(1)
-        dt = float(probe.dt)
-        probe.close()
-        own = latent.as_imitator(lib, dt=dt, device=device) if callable(getattr(latent, "as_imitator", None)) else None
-        if own is None:
-            raise UserError(f"{target.latent_checkpoint}: the {spec.latent.name} latent has no imitator of its own and the spec names none")
-        return LoadedTarget(target, skeleton, lib, own, latent, "pd_targets", own, make_sim)
-    imitator = plugins.get("imitator", spec.imitator.name).build(
-        resolved.params.get("imitator"), skeleton=skeleton, checkpoint=target.imitator_checkpoint, device=device
-    )
-    latent, label, policy = None, "policy_output", imitator
-    if use_latent and target.latent_checkpoint is not None:
-        latent = plugins.get("latent", spec.latent.name).build(
-            resolved.params.get("latent"), skeleton=skeleton, checkpoint=target.latent_checkpoint, device=device
-        )
-        label = str(load_latent_state(target.latent_checkpoint)["extra"].get("label", "policy_output"))
-        policy = latent_imitator(PDTargetTeacher(imitator) if label == "pd_targets" else imitator, latent)
-    return LoadedTarget(target, skeleton, lib, imitator, latent, label, policy, make_sim)
-
-
 @hookimpl
 def register_commands(app):  # type: ignore[no-untyped-def]
     @app.command("report")
@@ -779,3 +508,20 @@ def register_metrics(register):  # type: ignore[no-untyped-def]
     register("success_linf", lambda params: _success_metric(params, "max"), params=SuccessParams, description="no frame with any body over the threshold")
 
 
+__all__ = [
+    "EvalTarget",
+    "ImitationEval",
+    "ImitationEvalParams",
+    "LoadedTarget",
+    "Rollout",
+    "build_evaluation_target",
+    "check_trained_humanoid",
+    "compare_tables",
+    "episode_frames",
+    "evaluate_imitator",
+    "load_evaluation_target",
+    "record_video",
+    "render_comparison",
+    "render_table",
+    "rollout_imitation",
+]

@@ -84,7 +84,7 @@ class _Tables:
                 "hinge_axis": as_float(self.hinge_axes[self.hinge_dofs]),
                 "dof_inverse": as_long(self.dof_inverse),
             }
-            for k, joints, dofs in self.groups:
+            for k, _joints, dofs in self.groups:
                 out[f"group{k}_dofs"] = as_long(dofs)
             for i, level in enumerate(self.levels):
                 out[f"level{i}_joints"] = as_long(level.bodies - 1)

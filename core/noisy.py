@@ -181,7 +181,14 @@ def evaluate_noisy(
         observed = None if level.clean and smooth == 1 else noisy_library(library, level, seed + index, smooth)
         actor = policy if hasattr(policy, "act") else policy(observed if observed is not None else library)
         table = evaluate_imitator(actor, library, make_sim, params, default_metrics(), console, observed=observed)
-        rows.append({"level": index if level in DEFAULT_LEVELS else f"custom {i}", "noise": level.model_dump(), "aggregate": table["aggregate"], "clips": table["clips"]})
+        rows.append(
+            {
+                "level": index if level in DEFAULT_LEVELS else f"custom {i}",
+                "noise": level.model_dump(),
+                "aggregate": table["aggregate"],
+                "clips": table["clips"],
+            }
+        )
     return {
         "protocol": PROTOCOL,
         "imitation_protocol": table["protocol"],
@@ -204,7 +211,7 @@ def render_noisy(result: dict[str, Any]) -> Any:
     for row in result["levels"]:
         n, a = row["noise"], row["aggregate"]
 
-        def f(key: str) -> str:
+        def f(key: str, a: dict[str, Any] = a) -> str:
             v = a.get(key)
             return "-" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{v:.1f}"
 

@@ -48,7 +48,7 @@ class ActionMap:
     """Policy action (N, D) -> PD targets (N, D), rad.
 
     * ``"absolute"`` (PHC): ``q = offset + scale * a`` (:func:`pd_offset_scale`);
-    * ``"residual"`` (UHC/RFC-style, FEASIBILITY's faster-learning choice): ``q = q^_{t+1} + a``,
+    * ``"residual"`` (UHC/RFC-style; it learned faster in early CPU runs here): ``q = q^_{t+1} + a``,
       the next reference pose plus the action.
 
     ``clip`` (optional) clamps ``a`` to ``[-clip, clip]`` first.

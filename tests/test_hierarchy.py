@@ -3,7 +3,6 @@ baseline, and the ``task`` stage trained by PPO through the pipeline."""
 
 from __future__ import annotations
 
-import io
 import json
 import types
 from pathlib import Path
@@ -13,7 +12,6 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from pydantic import BaseModel, ConfigDict
-from rich.console import Console
 from test_distill import teacher_file, walk  # noqa: F401  (fixtures)
 
 from mocap.hierarchy import ScratchLatent, ScratchParams, TaskEnv
@@ -155,7 +153,8 @@ simulator: {{name: mujoco}}
 {imitator}{latent_section}
 task:
   name: upright
-  trainer: {{name: ppo, params: {{num_envs: 4, horizon: 8, total_env_steps: 64, minibatch_size: 16, epochs: 1, actor_hidden: [16], critic_hidden: [16], torch_threads: 1}}}}
+  trainer: {{name: ppo, params: {{num_envs: 4, horizon: 8, total_env_steps: 64, minibatch_size: 16, epochs: 1, \
+actor_hidden: [16], critic_hidden: [16], torch_threads: 1}}}}
 """
 
 

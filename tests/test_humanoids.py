@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from pydantic import ValidationError
 
 from mocap.humanoids import AmpParams, SmplParams, amp_skeleton, smpl_skeleton
 from mocap.humanoids.common import rest_body_positions, rest_root_height
@@ -104,9 +105,9 @@ def test_registered_as_plugins() -> None:
     assert {"amp", "smpl"} <= set(pset.names("humanoid"))
     assert pset.get("humanoid", "amp").build({"gain_scale": 2.0}).hinges[0].kp == 2000.0
     assert pset.get("humanoid", "smpl").build(None).num_dofs == 69
-    with pytest.raises(Exception):
+    with pytest.raises(ValidationError):
         AmpParams.model_validate({"scale": 2.0})
-    with pytest.raises(Exception):
+    with pytest.raises(ValidationError):
         SmplParams.model_validate({"height": -1.0})
 
 

@@ -294,7 +294,9 @@ def test_broadcasting_dtypes_gradients_and_cache():
     p, r = K.forward_kinematics_dofs(skeleton, rp, rr, d)
     (p.square().sum() + r[..., 1:].sum()).backward()
     assert all(x.grad is not None and torch.isfinite(x.grad).all() and x.grad.abs().sum() > 0 for x in (rp, rr, d))
-    assert torch.autograd.gradcheck(lambda x: K.forward_kinematics_dofs(skeleton, rp[:1].detach(), rr[:1].detach(), x)[0], (dofs[0, :, :].clone().requires_grad_(),))
+    assert torch.autograd.gradcheck(
+        lambda x: K.forward_kinematics_dofs(skeleton, rp[:1].detach(), rr[:1].detach(), x)[0], (dofs[0, :, :].clone().requires_grad_(),)
+    )
     # tables are cached per skeleton object and dropped with it
     tables = K._tables(skeleton)
     assert K._tables(skeleton) is tables

@@ -23,7 +23,11 @@ matrix:
 
 
 def test_expand_is_the_cartesian_product_with_readable_names(tmp_path):
-    doc = {"name": "x", "latent": {"name": "a"}, "matrix": {"latent": [{"name": "a"}, {"name": "b", "checkpoint": "ck/l.pt"}], "task.name": ["speed", "reach"], "seed": [0, 1, 2]}}
+    doc = {
+        "name": "x",
+        "latent": {"name": "a"},
+        "matrix": {"latent": [{"name": "a"}, {"name": "b", "checkpoint": "ck/l.pt"}], "task.name": ["speed", "reach"], "seed": [0, 1, 2]},
+    }
     cells = expand(doc, tmp_path)
     assert len(cells) == 12 and len({c.name for c in cells}) == 12
     first = cells[0]
@@ -101,7 +105,9 @@ def test_parallel_cells_train_a_shared_stage_once(tmp_path: Path):
     for i in range(2):
         out = tmp_path / "runs" / f"cmp{i}"
         code = runner.format(tests=str(Path(__file__).parent), spec=str(spec), out=str(out), store=str(store))
-        procs.append(subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env={**os.environ, "OMP_NUM_THREADS": "1"}))
+        procs.append(
+            subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env={**os.environ, "OMP_NUM_THREADS": "1"})
+        )
     outputs = [p.communicate(timeout=300)[0].decode() for p in procs]
     assert all(p.returncode == 0 for p in procs), outputs
     text = "\n".join(outputs)

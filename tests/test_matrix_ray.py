@@ -56,7 +56,8 @@ motions: {name: deepmimic, params: {clips: [walk]}}
 simulator: {name: mujoco}
 imitator:
   name: phc
-  trainer: {name: ppo, params: {num_envs: 2, horizon: 4, total_env_steps: 8, minibatch_size: 4, epochs: 1, actor_hidden: [16], critic_hidden: [16], torch_threads: 1}}
+  trainer: {name: ppo, params: {num_envs: 2, horizon: 4, total_env_steps: 8, minibatch_size: 4, epochs: 1, \
+actor_hidden: [16], critic_hidden: [16], torch_threads: 1}}
 eval: {trainer: {name: imitation_eval, params: {num_envs: 1, video: false}}}
 matrix:
   eval.trainer.params.threshold: [0.5, 0.3]

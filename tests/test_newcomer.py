@@ -89,7 +89,7 @@ def test_a_latent_with_its_own_tracker_is_evaluated_as_such():
     latent file is not a distilled latent, so the evaluator now drives its own tracker."""
     from pathlib import Path
 
-    from mocap.evaluation import _is_distilled
+    from mocap.eval_targets import _is_distilled
 
     root = Path(__file__).resolve().parents[1] / "checkpoints"
     assert not _is_distilled(root / "vmp_amp_v2" / "latent.pt")

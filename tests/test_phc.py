@@ -11,6 +11,7 @@ import pytest
 import torch
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from pydantic import ValidationError
 
 torch.set_num_threads(1)
 
@@ -278,7 +279,7 @@ def test_truncation_and_termination_flags(amp, clips):
     # time limit: zero residual on walk survives ~26 steps; a 5-step limit truncates every env
     env = make_env(amp, clips, n=4, clip_names=["walk"], episode_steps=5, hard_negative=False)
     env.reset()
-    for k in range(5):
+    for _k in range(5):
         res = env.step(torch.zeros(4, amp.num_dofs))
     assert res.truncated.all() and not res.terminated.any()
     assert res.episodes["length"].tolist() == [5.0] * 4 and res.episodes["success"].tolist() == [1.0] * 4
@@ -424,7 +425,7 @@ def test_registry_and_checkpoint(amp, tmp_path):
         comp = pset.get("imitator", "phc")
         imitator = comp.build({"action": "residual", "sixd": "tan_norm"}, skeleton=amp)
         assert isinstance(imitator, PHCImitator) and imitator.params.sixd == "tan_norm"
-        with pytest.raises(Exception):
+        with pytest.raises(ValidationError):
             comp.build({"bogus": 1}, skeleton=amp)
     params = PHCParams(obs="keypoint", action="absolute")
     obs_dim = 15 * amp.num_bodies - 2 + 9 * amp.num_bodies

@@ -193,7 +193,8 @@ imitator:
       plateau_evals: 2
       max_primitives: 2
       composer_form: weighted_sum
-      composer_ppo: {num_envs: 4, horizon: 16, total_env_steps: 192, minibatch_size: 32, epochs: 1, actor_hidden: [16], critic_hidden: [16], log_std_init: -2.9, learn_std: false, checkpoint_every: 2}
+      composer_ppo: {num_envs: 4, horizon: 16, total_env_steps: 192, minibatch_size: 32, epochs: 1, actor_hidden: [16], critic_hidden: [16], \
+log_std_init: -2.9, learn_std: false, checkpoint_every: 2}
 """
 
 
@@ -280,7 +281,7 @@ def test_pmcp_resume_is_exact_in_every_phase(straight, tmp_path):
     resolved = load_spec_text(SPEC, plugins)
     workdir = tmp_path / "art"
     stops = []
-    for attempt in range(30):
+    for _attempt in range(30):
         calls = {"n": 0}
 
         def stop(calls: dict[str, int] = calls) -> bool:
@@ -397,7 +398,11 @@ def test_pmcp_primitive0_from_a_trained_imitator(straight, tmp_path):
         assert [names[i] for i in state["primitives"][1]["clip_ids"]] == p0["evaluation"]["failed"]
     # a policy with other hidden sizes
     bad = tmp_path / "bad.yaml"
-    bad.write_text(spec.read_text().replace("actor_hidden: [16], critic_hidden: [16], checkpoint_every: 2}", "actor_hidden: [8], critic_hidden: [16], checkpoint_every: 2}", 1))
+    bad.write_text(
+        spec.read_text().replace(
+            "actor_hidden: [16], critic_hidden: [16], checkpoint_every: 2}", "actor_hidden: [8], critic_hidden: [16], checkpoint_every: 2}", 1
+        )
+    )
     result = invoke(["run", bad, "--out", tmp_path / "runs" / "b"])
     assert result.exit_code != 0 and "does not fit this imitator" in result.output and "Traceback" not in result.output
 

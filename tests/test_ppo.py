@@ -575,7 +575,7 @@ task:
 
 def test_export_policy_from_a_training_checkpoint(tmp_path):
     """``export_policy`` turns a resumable trainer checkpoint into a policy file with the same weights."""
-    from mocap.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+    from mocap.checkpoint import load_checkpoint, save_checkpoint
     from mocap.rl.networks import ActorCritic, export_policy, load_policy
 
     model = ActorCritic(5, Box((2,)), [8], [8])

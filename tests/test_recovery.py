@@ -72,14 +72,14 @@ def test_params_validate():
 
 
 # ------------------------------------------------------------------------------- fail states
-def _env(amp, walk, fail, n=4, recovery_goal=None):
+def _env(amp, clip, fail, n=4, recovery_goal=None):
     from mocap.motion.library import MotionLibrary
     from mocap_phc.env import ImitationEnv
     from mocap_phc.imitator import PHCParams
     from mocap_sim_mujoco.simulator import MujocoSimulator
 
     params = PHCParams(action="residual", fail_states=fail, recovery_goal=recovery_goal, hard_negative=False, eval_every=0)
-    return ImitationEnv(params, amp, MotionLibrary(walk, amp), MujocoSimulator(skeleton=amp, num_envs=n, seed=0), seed=3)
+    return ImitationEnv(params, amp, MotionLibrary(clip, amp), MujocoSimulator(skeleton=amp, num_envs=n, seed=0), seed=3)
 
 
 def test_fallen_starts_lie_on_the_ground_and_get_a_grace_window(amp, walk):  # noqa: F811

@@ -145,7 +145,9 @@ def test_reset_subset_leaves_other_envs_bit_identical(amp, library):
     keep = torch.tensor([i for i in range(n) if i not in (1, 6)])
     for _ in range(10):
         sa, sb = a.step(targets), b.step(targets)
-    for name in ("root_pos", "root_rot", "body_pos", "body_rot", "body_lin_vel", "body_ang_vel", "dof_pos", "dof_vel", "contact_forces", "body_contact", "dof_force"):
+    for name in (
+        "root_pos", "root_rot", "body_pos", "body_rot", "body_lin_vel", "body_ang_vel", "dof_pos", "dof_vel", "contact_forces", "body_contact", "dof_force"
+    ):
         assert torch.equal(getattr(sa, name)[keep], getattr(sb, name)[keep]), name
     assert not torch.equal(sa.body_pos[sub], sb.body_pos[sub])
     # after a step the bodies are the forward kinematics of the returned root and DoFs (no lag)

@@ -165,7 +165,9 @@ def test_random_text_gives_a_spec_or_a_clean_error(text):
 
 @settings(max_examples=100, deadline=None)
 @given(
-    st.sampled_from(["imitator.params.hidden", "imitator.params.optim.lr", "seed", "latent.name", "simulator.params", "name", "x.y", "imitator.trainer.params.iterations"]),
+    st.sampled_from(
+        ["imitator.params.hidden", "imitator.params.optim.lr", "seed", "latent.name", "simulator.params", "name", "x.y", "imitator.trainer.params.iterations"]
+    ),
     st.one_of(st.text(max_size=6), st.integers().map(str), st.floats().map(str), st.just("[1, 2]"), st.just("null"), st.just("{a: 1}")),
 )
 def test_random_overrides_give_a_spec_or_a_clean_error(key, value):

@@ -249,7 +249,9 @@ def test_pushes_happen_on_schedule_and_change_velocities(amp):
     from mocap_vmp.randomization import DomainRandomizationParams, DomainRandomizer
 
     sim = _plain_sim(amp, 2)
-    p = DomainRandomizationParams(mass_pct=None, ground_friction=None, push_interval_s=(0.1, 0.1), push_duration_s=(0.1, 0.1), push_force_max_mg=1.0, push_torque_max=10.0)
+    p = DomainRandomizationParams(
+        mass_pct=None, ground_friction=None, push_interval_s=(0.1, 0.1), push_duration_s=(0.1, 0.1), push_force_max_mg=1.0, push_torque_max=10.0
+    )
     dr = DomainRandomizer(p, sim, torch.Generator().manual_seed(1))
     dr.on_reset(torch.arange(2))
     assert dr._models is None  # no per-env models without mass or friction randomization

@@ -268,7 +268,9 @@ def test_discrete_mutual_information_properties(seed, k, m, n):
 def test_binned_mutual_information(amp):
     g = torch.Generator().manual_seed(0)
     y = torch.arange(4).repeat(250)
-    z = torch.cat((y[:, None].double() + 0.01 * torch.randn(1000, 1, generator=g, dtype=torch.float64), torch.randn(1000, 1, generator=g, dtype=torch.float64)), -1)
+    z = torch.cat(
+        (y[:, None].double() + 0.01 * torch.randn(1000, 1, generator=g, dtype=torch.float64), torch.randn(1000, 1, generator=g, dtype=torch.float64)), -1
+    )
     codes = quantile_bins(z, 4)
     assert codes.shape == (1000, 2) and int(codes.min()) == 0 and int(codes.max()) == 3
     assert torch.bincount(codes[:, 1]).tolist() == [250] * 4  # equal-count bins

@@ -87,7 +87,7 @@ def load_motion_set(source: str, paths: list[Path] | None, clips: list[str] | No
 
 def _warn_skipped(mset: Any) -> None:
     err = Console(stderr=True, soft_wrap=True)
-    for path, reason in mset.skipped:
+    for _path, reason in mset.skipped:
         err.print(f"[yellow]skipped:[/] {reason}", highlight=False)
 
 

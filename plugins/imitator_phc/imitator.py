@@ -1,8 +1,8 @@
 """The ``phc`` imitator: parameters (every paper-vs-code switch), the factory and the trained imitator.
 
 Defaults follow the paper wherever PHC (ICCV 2023) states a value, and the official code where
-the paper is silent (DESIGN.md "paper fidelity"); each field's description says which is which.
-For small CPU runs, FEASIBILITY.md's learning measurements favour ``action: residual``; the code's
+the paper is silent; each field's description says which is which.
+For small CPU runs, early learning measured on 2 cores favours ``action: residual``; the code's
 reward form (``reward_form: code``) is the one PHC was actually trained with. One exception to
 "paper by default": ``energy_form`` defaults to the code's |tau q-dot| (see its description).
 
@@ -79,17 +79,17 @@ class PHCParams(BaseModel):
         None, description="bodies not checked (RET: ankles and toes); None: the skeleton's feet (smpl: ankles + toes; amp: feet)"
     )
     fall_check: bool = Field(
-        False, description="also terminate when a non-foot body touches the ground (not PHC imitation; FEASIBILITY's env used it)"
+        False, description="also terminate when a non-foot body touches the ground (not PHC imitation; ASE/AMP style)"
     )
     fall_height: float | None = Field(None, gt=0.0, description="with fall_check: only count contacts of bodies below this height, m (ASE: 0.15)")
     # ------------------------------------------------------------------------------ action
     action: Literal["absolute", "residual"] = Field(
         "absolute",
         description="'absolute' = PD target offset + scale * a ([P]/[C]: PHC removed residual actions) or "
-        "'residual' = next reference pose + a (UHC-style; FEASIBILITY: cheaper early learning on CPU)",
+        "'residual' = next reference pose + a (UHC-style; cheaper early learning on CPU, measured here)",
     )
     action_clip: float | None = Field(
-        None, gt=0.0, description="clamp actions to [-clip, clip] (the env's Box bounds); None: unbounded (FEASIBILITY's residual run: 3)"
+        None, gt=0.0, description="clamp actions to [-clip, clip] (the env's Box bounds); None: unbounded (the committed residual recipe: 3)"
     )
     action_scale_overrides: dict[str, float] = Field(
         default_factory=lambda: {"*Knee_y": 5.0},

@@ -47,7 +47,8 @@ def register_commands(app: Any) -> None:
             str, typer.Option("--reference", help="'still': a standing frame held, PHC Table 4 (default); 'clip': the clip played, a moving target")
         ] = "still",
         clip: Annotated[
-            Optional[str], typer.Option("--clip", help="'still': hold this clip's last frame (default: the stillest standing frame); 'clip': the clip (default: walk)")
+            Optional[str],
+            typer.Option("--clip", help="'still': hold this clip's last frame (default: the stillest standing frame); 'clip': the clip (default: walk)"),
         ] = None,
         far_prob: Annotated[float, typer.Option("--far-prob", help="share of trials also 2-5 m away from the reference")] = 0.5,
         seed: Annotated[int, typer.Option("--seed")] = 0,

@@ -11,7 +11,7 @@ SMPL; by default the skeleton's ``feet``, which are the ankles and toes of ``smp
   checked body is farther than ``threshold`` (0.25 m), and only once the episode is more than
   ``grace`` = 1 step old (``progress_buf > 1``: the first step after a reset is never checked).
 
-Optional fall check (not PHC imitation; ASE/AMP style and FEASIBILITY's env): terminate when a
+Optional fall check (not PHC imitation; ASE/AMP style): terminate when a
 non-foot body touches the ground (``SimState.body_contact``), optionally only when that body is
 also below ``fall_height``.
 """

@@ -175,7 +175,9 @@ class PulseParams(BaseModel):
     rl_gamma: float = Field(0.99, ge=0, le=1, description="rl_term: discount γ ([P] PHC+ 0.99)")
     rl_lambda: float = Field(0.95, ge=0, le=1, description="rl_term: GAE λ ([CODE] 0.95)")
     rl_clip: float = Field(0.2, gt=0, description="rl_term: PPO clip ε ([P] PHC+ 0.2)")
-    rl_value_coef: float = Field(1.0, ge=0, description="rl_term: weight of the critic's ½(V − R)² loss (only the critic's weights get its gradient; [CODE] PPO critic_coef 5)")
+    rl_value_coef: float = Field(
+        1.0, ge=0, description="rl_term: weight of the critic's ½(V − R)² loss (only the critic's weights get its gradient; [CODE] PPO critic_coef 5)"
+    )
     rl_normalize_advantages: bool = Field(True, description="rl_term: normalize advantages per minibatch ([CODE] rl_games normalizes)")
     rl_reward_form: Literal["paper", "code"] = Field(
         "paper", description="rl_term: the phc imitation reward's error form (mocap.imitation_rewards: 'paper' norms, 'code' mean squares)"
