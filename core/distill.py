@@ -59,6 +59,10 @@ averaged over ranks before the clip and the step, and the student's running norm
 merged exactly. Rank 0 alone runs the periodic evaluation and sends its result (and the clips it
 failed, for the failure counts) to the others; rank 0 writes ``distill.pt`` with each rank's
 rollout state (``rank_states``) and ``latent.pt``.
+
+Moved out (re-exported here): the parameters and β schedule to :mod:`mocap.distill_params`, the file
+names, formats, :func:`save_latent` and :func:`load_latent_state` to :mod:`mocap.distill_files`, the
+chunk helpers to :mod:`mocap.distill_chunks`.
 """
 
 from __future__ import annotations
@@ -68,15 +72,14 @@ import random
 import time
 from collections import deque
 from pathlib import Path
-from typing import Any, Callable, Literal
+from typing import Any, Callable
 
 import numpy as np
 import torch
-from pydantic import BaseModel, ConfigDict, Field, model_validator
 from torch import Tensor
 
 from mocap import distributed as dist
-from mocap.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from mocap.checkpoint import load_checkpoint, save_checkpoint
 from mocap.faults import FaultGuard
 from mocap.rng import rng_state, set_rng_state
 from mocap.hooks import hookimpl
@@ -88,157 +91,19 @@ from mocap.latent_imitator import LatentImitator, PDTargetTeacher, observations_
 from mocap.motion.library import MotionLibrary
 from mocap.distill_episodes import DistillEpisodes
 from mocap.state import Observations
-from mocap.bounds import EnvCount, LearningRate, ThreadCount
-from mocap.fail_states import FailStateParams
+from mocap.distill_files import CHECKPOINT_FORMAT, CHECKPOINT_NAME, LATENT_FORMAT, LATENT_NAME, load_latent_state, save_latent
+from mocap.distill_params import DistillParams, mixture_beta
+from mocap.distill_chunks import _columns, _stack_obs
 
-CHECKPOINT_FORMAT = "mocap.distill/1"
-CHECKPOINT_NAME = "distill.pt"
-LATENT_FORMAT = "mocap.latent/1"
-LATENT_NAME = "latent.pt"
 EPISODE_WINDOW = 100
 
 
-# ---------------------------------------------------------------------------------- parameters
-class DistillParams(BaseModel):
-    """Online distillation ([P] PULSE paper, [CODE] official PULSE code, [CPU] 2-core default)."""
-
-    model_config = ConfigDict(extra="forbid")
-
-    num_envs: EnvCount = Field(64, description="parallel envs ([CODE]/[P] Table 4 'batch size' 3072; [CPU] 64)")
-    horizon: int = Field(32, ge=1, description="steps per env per iteration; chunk = num_envs × horizon ([CODE] 32)")
-    total_env_steps: int = Field(2_000_000, ge=1, description="budget in env steps, rounded up to whole iterations ([P] ~1e9)")
-    epochs: int = Field(2, ge=1, description="passes over each chunk")
-    minibatch_envs: int = Field(
-        16, ge=1, description="env columns per minibatch; each keeps its horizon steps in time order (minibatch = this × horizon samples)"
-    )
-    lr: LearningRate = Field(5e-4, description="Adam learning rate ([P] 5e-4)")
-    label: Literal["policy_output", "pd_targets"] = Field(
-        "policy_output",
-        description="what the student learns: the teacher's raw policy output ([P]/[CODE]: PHC's normalized absolute "
-        "action) or its PD targets in rad. Use 'pd_targets' with a teacher whose output needs the reference to become "
-        "PD targets (PHC `action: residual`): tasks have no reference, so a decoder must produce targets on its own",
-    )
-    max_grad_norm: float | None = Field(50.0, gt=0, description="global gradient-norm clip; None = off ([CODE] 50)")
-    act_with: Literal["student", "teacher", "mixture"] = Field(
-        "student",
-        description="who drives the simulator: 'student' ([P] PULSE/DAgger: the student acts, the teacher labels), "
-        "'teacher' (behaviour cloning) or 'mixture' (DAgger's β: the teacher with probability β per env and step)",
-    )
-    mixture_beta: tuple[float, float] = Field(
-        (1.0, 0.0), description="'mixture': β at progress 0 and from mixture_anneal_end on (linear in between)"
-    )
-    mixture_anneal_end: float = Field(0.5, gt=0, le=1, description="'mixture': progress at which β reaches mixture_beta[1]")
-    sample_latent: bool = Field(True, description="rollouts sample z from the encoder ([P]/[CODE]); false: z = encoder mean")
-    termination_threshold: float = Field(
-        0.5, gt=0, description="terminate when the mean body-position error exceeds this, m ([P] success criterion 0.5; PHC+ training [CODE] 0.25 on any body)"
-    )
-    termination_grace: int = Field(0, ge=0, description="steps after a reset that are never checked for termination")
-    fail_states: FailStateParams | None = Field(
-        None,
-        description="fallen-state starts and bonus recovery episodes during distillation (mocap.fail_states), so the "
-        "student (and PULSE's prior) sees get-up states: [CODE] PULSE distills with fallInitProb 0.1 and "
-        "recoveryEpisodeProb 0.3 (fall_init_prob, recovery_episode_prob); [P] does not mention them; None: off",
-    )
-    episode_steps: int = Field(300, ge=1, description="time limit in control steps ([CODE] 300 = 10 s at 30 Hz)")
-    control_grid: bool = Field(
-        True,
-        description="start times on the control-rate grid and the reference read from a table precomputed at those times "
-        "(MotionLibrary.use_control_grid, as the phc env); False: continuous start times, interpolated every step",
-    )
-    hard_negative: bool = Field(True, description="clip sampling weights follow per-clip failure counts (PHC+ soft mining)")
-    hard_negative_floor: float = Field(0.2, ge=0, le=1, description="share of sampling mass kept on the base weights ([CODE] 0)")
-    hard_negative_decay: float = Field(1.0, gt=0, le=1, description="failure counts are multiplied by this before each addition ([CODE] 1)")
-    update_every: int = Field(256, ge=1, description="finished training episodes between failure-rate updates of the counts")
-    eval_every: int = Field(
-        50, ge=0, description="iterations between evaluations of the student as an imitator (also at the end); 0 disables ([CODE] 500 epochs)"
-    )
-    eval_num_envs: int = Field(64, ge=1, description="clips evaluated in parallel")
-    eval_horizon: float | None = Field(
-        None, gt=0, description="seconds per evaluation episode of looping clips; None: episode_steps × dt"
-    )
-    torch_threads: ThreadCount | None = Field(1, description="torch intra-op threads for this stage (None: keep the process setting)")
-    max_consecutive_faults: int = Field(
-        10, ge=0, description="stop after this many consecutive batches with non-finite values (each is skipped); 0: only skip"
-    )
-    checkpoint_every: int = Field(10, ge=1, description="iterations between checkpoints (also at the end and on Ctrl-C)")
-    print_every: int = Field(10, ge=1, description="iterations between progress lines when the console is not a terminal")
-
-    @model_validator(mode="after")
-    def _check(self) -> "DistillParams":
-        if self.minibatch_envs > self.num_envs:
-            raise ValueError(f"minibatch_envs {self.minibatch_envs} exceeds num_envs {self.num_envs}")
-        for b in self.mixture_beta:
-            if not 0.0 <= b <= 1.0:
-                raise ValueError(f"mixture_beta values are probabilities in [0, 1], got {self.mixture_beta}")
-        return self
-
-    @property
-    def batch_size(self) -> int:
-        return self.num_envs * self.horizon
-
-    @property
-    def iterations(self) -> int:
-        return math.ceil(self.total_env_steps / self.batch_size)
-
-
-# ---------------------------------------------------------------------------------- pure helpers
-def mixture_beta(progress: float, start: float, end: float, anneal_end: float) -> float:
-    """DAgger's β (probability that the teacher acts): ``start`` at progress 0, linear to ``end`` at
-    ``anneal_end``, ``end`` afterwards."""
-    if progress >= anneal_end:
-        return float(end)
-    return float(start + (end - start) * max(progress, 0.0) / anneal_end)
-
-
-# ------------------------------------------------------------------------------ latent files
+# ---------------------------------------------------------------------------------- errors
 class DistillError(StageFailed):
     """A spec that cannot be distilled (shown to the user without a traceback)."""
 
 
-def save_latent(path: Path, latent: torch.nn.Module, extra: dict[str, Any] | None = None, *, spec_yaml: str | None = None) -> None:
-    """Write a trained latent space (``config`` if it has one, weights, buffers) atomically to ``path``."""
-    state = {k: v.detach().cpu() if isinstance(v, Tensor) else v for k, v in latent.state_dict().items()}
-    save_checkpoint(
-        Path(path),
-        {"format": LATENT_FORMAT, "config": getattr(latent, "config", None), "state_dict": state, "extra": extra or {}},
-        spec_yaml=spec_yaml,
-    )
-
-
-def load_latent_state(path: Path, map_location: str | torch.device = "cpu") -> dict[str, Any]:
-    """``{"config", "state_dict", "extra", "spec"}`` of a latent file (:func:`save_latent`) or of the
-    student inside a resumable ``distill.pt``; a latent factory rebuilds its module from these."""
-    data = load_checkpoint(Path(path), map_location=map_location)
-    fmt = data.get("format")
-    if fmt == LATENT_FORMAT:
-        return {"config": data.get("config"), "state_dict": data["state_dict"], "extra": data.get("extra", {}), "spec": data.get("spec")}
-    if fmt == CHECKPOINT_FORMAT:  # a training checkpoint: the label it trains on is in its params (latent.pt keeps it in extra)
-        params = data.get("params") if isinstance(data.get("params"), dict) else {}
-        extra = {"label": params["label"]} if isinstance(params.get("label"), str) else {}
-        return {"config": data.get("latent_config"), "state_dict": data["student"], "extra": extra, "spec": data.get("spec")}
-    raise CheckpointError(f"{path}: not a distilled latent-space file (format {fmt!r}, expected {LATENT_FORMAT!r} or {CHECKPOINT_FORMAT!r})")
-
-
 # ------------------------------------------------------------------------------------ trainer
-def _stack_obs(items: list[Observations]) -> Observations:
-    """(T, N, ...) observations from T steps of (N, ...) ones (tensor extras with N rows are kept)."""
-    first = items[0]
-    goal = None if first.goal is None else torch.stack([o.goal for o in items])  # type: ignore[misc]
-    extra = {}
-    for k, v in first.extra.items():
-        if isinstance(v, Tensor) and v.dim() > 0 and v.shape[0] == first.proprio.shape[0]:
-            extra[k] = torch.stack([o.extra[k] for o in items])
-    return Observations(proprio=torch.stack([o.proprio for o in items]), goal=goal, extra=extra)
-
-
-def _columns(obs: Observations, idx: Tensor) -> Observations:
-    return Observations(
-        proprio=obs.proprio[:, idx],
-        goal=None if obs.goal is None else obs.goal[:, idx],
-        extra={k: v[:, idx] for k, v in obs.extra.items()},
-    )
-
-
 class DistillTrainer(Trainer):
     """Distills the imitator stage into the latent stage (module docstring); resumes from ``distill.pt``."""
 
@@ -682,9 +547,11 @@ def register_trainers(register):  # type: ignore[no-untyped-def]
 
 
 __all__ = [
+    "CHECKPOINT_FORMAT",
     "DistillEpisodes",
     "DistillParams",
     "DistillTrainer",
+    "LATENT_FORMAT",
     "failure_weights",
     "load_latent_state",
     "mixture_beta",

@@ -229,6 +229,20 @@ class ImitationEval(Trainer):
     def __init__(self, params: ImitationEvalParams):
         self.params = params
 
+    def preflight(self, resolved: Any, plugins: Any) -> None:
+        """``video_clip`` names a clip of the spec's motion set (checked before any stage trains)."""
+        p = self.params
+        if not (p.video and p.video_clip):
+            return
+        spec = resolved.spec
+        skeleton = plugins.get("humanoid", spec.humanoid.name).build(resolved.params.get("humanoid"))
+        names = plugins.get("motion_source", spec.motions.name).build(resolved.params.get("motions")).load(skeleton).names
+        if p.video_clip not in names:
+            from mocap.errors import UserError
+
+            shown = ", ".join(names[:20]) + (f", ... ({len(names)} clips)" if len(names) > 20 else "")
+            raise UserError(f"eval.trainer.params.video_clip: no clip {p.video_clip!r} in the motion set (clips: {shown or 'none'})")
+
     def run(self, ctx) -> StageResult:  # type: ignore[no-untyped-def]
         p = self.params
         skeleton = ctx.skeleton

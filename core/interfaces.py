@@ -22,7 +22,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Protocol, Sequence
+from typing import TYPE_CHECKING, Any, Callable, ClassVar, Protocol, Sequence
 
 import torch
 from torch import Tensor
@@ -268,8 +268,19 @@ class Trainer(ABC):
     check ``ctx.should_stop()`` between iterations and, when it returns True, save and return.
     """
 
+    #: True when the trainer runs on every rank under torchrun (data-parallel); False: rank 0 runs
+    #: it alone while the other ranks wait (:mod:`mocap.distributed`)
+    data_parallel: ClassVar[bool] = False
+
     @abstractmethod
     def run(self, ctx: "StageContext") -> StageResult: ...
+
+    def preflight(self, resolved: Any, plugins: Any) -> None:  # noqa: B027 - optional hook
+        """Checks that need no training, run by ``mocap run`` before its first stage trains (a clip
+        name, an input file), so that a mistake is reported in seconds instead of after hours of
+        training. ``resolved``: the validated spec (:class:`mocap.spec.ResolvedSpec`); ``plugins``:
+        the registry. Raise :class:`mocap.errors.UserError` with one line naming the field. Default:
+        nothing to check."""
 
 
 Factory = Callable[..., Any]

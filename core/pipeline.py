@@ -44,7 +44,7 @@ from mocap.motion.clip import MotionDataError
 from mocap.plugins import PluginError, PluginSet, UnknownComponent
 from mocap.runlog import MetricsLogger
 from mocap.skeleton import Skeleton
-from mocap.spec import STAGES, ResolvedSpec, Spec
+from mocap.spec import STAGES, ResolvedSpec, Spec, StageSpec
 
 ARTIFACT_FORMAT = 1
 DONE_FILE = "DONE.json"
@@ -327,6 +327,19 @@ def run_dir_lock(out_dir: Path) -> Iterator[None]:
             fcntl.flock(fh, fcntl.LOCK_UN)
 
 
+def _preflight(resolved: ResolvedSpec, plugins: PluginSet, keys: dict[str, str], store: Path) -> None:
+    """Every stage that will train: its trainer's :meth:`~mocap.interfaces.Trainer.preflight` checks,
+    before the first stage starts (a finished, reused stage is not checked again)."""
+    for stage, key in keys.items():
+        section = getattr(resolved.spec, stage)
+        if section is None or section.trainer is None or (isinstance(section, StageSpec) and section.checkpoint):
+            continue
+        if (store / f"{stage}-{key}" / DONE_FILE).is_file():
+            continue
+        trainer = plugins.get("trainer", section.trainer.name).build(resolved.params.get(f"{stage}.trainer"))
+        trainer.preflight(resolved, plugins)
+
+
 def _run_pipeline_locked(
     resolved: ResolvedSpec, plugins: PluginSet, out_dir: Path, store: Path, console: Console, main: bool
 ) -> list[StageRecord]:
@@ -339,6 +352,7 @@ def _run_pipeline_locked(
     if dist.world_size() > 1:
         console.print(f"data-parallel: {dist.world_size()} processes ({device.type}); rank 0 writes {out_dir}", highlight=False)
     keys = resolved_stage_keys(resolved, plugins)
+    _preflight(resolved, plugins, keys, store)
     records: list[StageRecord] = []
     upstream: dict[str, StageResult] = {}
     started = time.time()
@@ -472,7 +486,7 @@ def _run_stage_locked(
     verb = "resuming" if resuming else "running"
     console.print(f"[bold]{stage}[/]: {verb} trainer {trainer_ref.name!r} in {workdir}")
     parallel = dist.world_size() > 1
-    data_parallel = parallel and bool(getattr(trainer, "data_parallel", False))
+    data_parallel = parallel and trainer.data_parallel
     if data_parallel:
         ctx.seed = dist.rank_seed(ctx.seed)  # each rank its own environments
     elif parallel:

@@ -183,3 +183,19 @@ def test_editing_a_motion_file_in_place_changes_every_trained_stage_key(tmp_path
     assert after["imitator"] != before["imitator"] and after["eval"] != before["eval"]
     walk.write_text(walk.read_text().replace('"Loop" ', '"Loop"', 1))
     assert keys() == before  # by content, not by modification time
+
+
+def test_a_misspelled_video_clip_fails_before_any_stage_trains(tmp_path: Path):
+    """``eval.trainer.params.video_clip`` is checked by the eval trainer's preflight before the imitator
+    trains, not hours later when the eval stage records its video."""
+    from mocap.errors import UserError
+    from mocap.plugins import get_plugins
+    from mocap.spec import load_spec
+
+    plugins = get_plugins()
+    root = Path(__file__).resolve().parents[1]
+    sets = ["motions.params.clips=[walk, run]", "eval.trainer.params.video_clip=wlak"]
+    resolved = load_spec(root / "specs" / "imitator" / "amp_bundled.yaml", plugins, sets)
+    with pytest.raises(UserError, match=r"video_clip: no clip 'wlak' in the motion set \(clips: walk, run\)"):
+        run_pipeline(resolved, plugins, tmp_path / "runs" / "x", console=quiet())
+    assert not (tmp_path / "runs" / "artifacts").exists() or not any((tmp_path / "runs" / "artifacts").iterdir())

@@ -54,12 +54,14 @@ as the older ones, i.e. the motion the humanoid is pretended to have come from (
 ``_init_amp_obs_ref``). :meth:`ImitationEnv.after_iteration` trains the discriminator on the last
 rollout's windows (``amp_updates_per_iteration`` steps of ``amp_batch``); the discriminator, its
 optimizer, buffers and generator, and the windows are part of :meth:`ImitationEnv.state_dict`.
+
+The observation/action code is in :mod:`mocap_phc.observation` and the per-clip mining and
+evaluation methods in :mod:`mocap_phc.env_mining` (a base class of :class:`ImitationEnv`); both re-exported here.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Callable, Literal
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 import torch
@@ -68,103 +70,27 @@ from torch import Tensor
 from mocap.fail_states import fail_starts, generate_fall_states
 from mocap.hard_negatives import FailureTracker
 from mocap.hard_negatives import failure_weights as hard_negative_weights
-from mocap.interfaces import Imitator, Simulator
+from mocap.interfaces import Simulator
 from mocap.motion.library import MotionLibrary, grid_start_times
 from mocap.pd_actions import ActionMap, pd_offset_scale
-from mocap.observations import imitation_goal_dim, proprioception_and_goal, proprioception_dim
 from mocap.rl.env import StepResult
 from mocap.skeleton import Skeleton
 from mocap.start_sampling import AdaptiveStartSampler
-from mocap.state import HUMANOID_FIELDS, HumanoidState, MotionFrames, Observations, SimState
+from mocap.state import HUMANOID_FIELDS, HumanoidState, MotionFrames, SimState
 from mocap_phc.amp import AMPHistory, AMPObservation, DiscriminatorTrainer, demo_windows, loss_config, window_frames
 from mocap.imitation_rewards import ImitationReward, energy_penalty
+from mocap_phc.env_mining import ClipMining, PolicyFn
+from mocap_phc.observation import PHCObservation, PolicyImitator
 from mocap_phc.termination import Termination
 
 if TYPE_CHECKING:  # pragma: no cover
     from mocap_phc.imitator import PHCParams
 
 STATE_FORMAT = 1
-PolicyFn = Callable[[Tensor], Tensor]
-
-
-# ------------------------------------------------------------------------------- observations
-@dataclass(frozen=True)
-class PHCObservation:
-    """PHC's policy input: proprioception s^p and the imitation goal s^g (:mod:`mocap.observations`).
-
-    The flat policy observation is ``[s^p | s^g]``; ``extra["ref_dof_pos"]`` carries the next
-    reference's DoF angles for the residual action mapping (not part of the flat vector).
-    """
-
-    goal: Literal["rot", "keypoint"] = "rot"
-    sixd: Literal["zhou", "tan_norm"] = "zhou"
-    recovery: Any = None  # RecoveryGoalParams: far from the reference, imitate its root only (mocap_phc.recovery)
-
-    def dim(self, num_bodies: int) -> int:
-        return proprioception_dim(num_bodies) + imitation_goal_dim(num_bodies, self.goal)
-
-    def __call__(self, state: HumanoidState, ref_next: HumanoidState) -> Observations:
-        extra: dict[str, Any] = {}
-        if self.recovery is not None:
-            from mocap_phc.recovery import recovery_reference
-
-            ref_next, far = recovery_reference(state, ref_next, self.recovery)
-            extra["recovering"] = far
-        proprio, goal = proprioception_and_goal(state, ref_next, self.goal, self.sixd)
-        # no per-step nan_to_num: simulators put an unstable env back to a finite state
-        # (SimState.unstable), so the inputs here are finite
-        return Observations(proprio=proprio.float(), goal=goal.float(), extra={"ref_dof_pos": ref_next.dof_pos, **extra})
-
-    @staticmethod
-    def flatten(obs: Observations) -> Tensor:
-        """(N, P + G) policy input."""
-        assert obs.goal is not None
-        return torch.cat((obs.proprio, obs.goal), dim=-1)
-
-
-# ------------------------------------------------------------------------------------ actions
-class PolicyImitator(Imitator):
-    """An :class:`Imitator` from a policy on PHC's flat observation: ``observe`` builds
-    :class:`PHCObservation`, ``act`` runs the policy and maps its action with :class:`ActionMap`.
-
-    ``policy``: an object with ``mean_action(obs)`` and ``act(obs) -> (action, ...)`` (a
-    :class:`mocap.rl.networks.ActorCritic`), or a plain callable ``obs -> action`` (deterministic).
-    """
-
-    def __init__(self, observation: PHCObservation, action_map: ActionMap, policy: Any = None, device: torch.device | str = "cpu"):
-        self.observation = observation
-        self.action_map = action_map
-        self.policy = policy
-        self.device = torch.device(device)
-
-    def observe(self, state: SimState, reference: MotionFrames) -> Observations:
-        return self.observation(state, reference)
-
-    def policy_action(self, flat_obs: Tensor, deterministic: bool = True) -> Tensor:
-        if self.policy is None:
-            raise RuntimeError("this imitator has no trained policy (build it with a checkpoint)")
-        x = flat_obs.to(self.device)
-        with torch.no_grad():
-            if hasattr(self.policy, "mean_action"):
-                if deterministic:
-                    return self.policy.mean_action(x)
-                out = self.policy.act(x)
-                return out[0] if isinstance(out, tuple) else out
-            return self.policy(x)
-
-    def policy_output(self, obs: Observations, deterministic: bool = True) -> Tensor:
-        """The policy's raw action (normalized absolute targets or a residual), before :class:`ActionMap`."""
-        return self.policy_action(PHCObservation.flatten(obs), deterministic).to(obs.proprio.device)
-
-    def to_pd_targets(self, obs: Observations, output: Tensor) -> Tensor:
-        return self.action_map(output, obs.extra.get("ref_dof_pos"))
-
-    def act(self, obs: Observations, deterministic: bool = True) -> Tensor:
-        return self.to_pd_targets(obs, self.policy_output(obs, deterministic))
 
 
 # ---------------------------------------------------------------------------------------- env
-class ImitationEnv:
+class ImitationEnv(ClipMining):
     """N imitation episodes on a motion library (module docstring).
 
     Args:
@@ -467,97 +393,7 @@ class ImitationEnv:
         self._eval_sims.clear()
         self.sim.close()
 
-    # ------------------------------------------------------------------ hard negatives
-    @property
-    def clip_weights(self) -> Tensor:
-        """(C,) current clip sampling probabilities."""
-        return self.library.weights.detach().to("cpu", torch.float64).clone()
-
-    def clip_stats(self) -> dict[str, dict[str, float]]:
-        """Per clip: finished training ``episodes``, ``failures`` (terminations), the mining count
-        ``fail_count`` and the current sampling ``weight``."""
-        w = self.clip_weights
-        return {
-            name: {
-                "episodes": float(self.episodes_per_clip[i]),
-                "failures": float(self.failures_per_clip[i]),
-                "fail_count": float(self.fail_counts[i]),
-                "weight": float(w[i]),
-            }
-            for i, name in enumerate(self.library.clip_names)
-        }
-
-    def _record(self, clip_ids: Tensor, failed: Tensor) -> None:
-        """Count finished training episodes (the shared :class:`~mocap.hard_negatives.FailureTracker`)."""
-        self.failures.record(clip_ids, failed)
-
-    def _add_failures(self, amount: Tensor) -> None:
-        self.failures.add_failures(amount)
-
-    # per-clip failure bookkeeping lives in the shared tracker (mocap.hard_negatives)
-    @property
-    def fail_counts(self) -> Tensor:
-        return self.failures.fail_counts
-
-    @property
-    def episodes_per_clip(self) -> Tensor:
-        return self.failures.episodes_per_clip
-
-    @property
-    def failures_per_clip(self) -> Tensor:
-        return self.failures.failures_per_clip
-
-    @property
-    def base_weights(self) -> Tensor:
-        return self.failures.base_weights
-
-    def evaluate_clips(self, policy_fn: PolicyFn) -> dict[str, Any]:
-        """Every clip once from frame 0 with ``policy_fn`` (flat obs -> action, deterministic) in a
-        separate simulator; failed clips add 1 to their failure count and the weights are refreshed.
-
-        Horizon: the whole clip for non-looping clips, ``episode_steps`` for looping ones.
-        Returns ``success_rate``, ``failed`` (clip names), ``clips`` (name -> ``success``,
-        ``tracked_steps``) and ``weights`` (name -> sampling probability after the update).
-        """
-        from mocap.evaluation import episode_frames, rollout_imitation
-
-        if self._eval_factory is None:
-            raise RuntimeError("evaluate_clips needs an eval_simulator_factory")
-        lib, p = self.library, self.params
-        C = lib.num_clips
-        imitator = PolicyImitator(self.observation, self.action_map, policy_fn)
-        chunk = max(1, min(p.eval_num_envs, C))
-        failed = torch.zeros(C, dtype=torch.bool)
-        tracked = torch.zeros(C, dtype=torch.long)
-        horizon = episode_frames(lib, torch.arange(C, device=lib.device), self.dt, p.episode_steps * self.dt).cpu()
-        for start in range(0, C, chunk):
-            ids = torch.arange(start, min(start + chunk, C))
-            sim = self._eval_sim(len(ids))
-            out = rollout_imitation(sim, lib, imitator, ids.to(lib.device), horizon[ids], threshold=p.eval_threshold)
-            tr = out.traj
-            valid = tr.valid()
-            err = torch.linalg.vector_norm(tr.sim - tr.ref, dim=-1).mean(-1)
-            bad = ((err > p.eval_threshold) & valid).any(0) | out.unstable.cpu()
-            failed[ids] = bad
-            tracked[ids] = (valid.sum(0) - 1).clamp_min(0)
-        self._add_failures(failed.to(torch.float64))
-        names = lib.clip_names
-        w = self.clip_weights
-        result = {
-            "success_rate": float((~failed).double().mean()),
-            "failed": [names[i] for i in range(C) if failed[i]],
-            "clips": {names[i]: {"success": bool(~failed[i]), "tracked_steps": int(tracked[i])} for i in range(C)},
-            "weights": {names[i]: float(w[i]) for i in range(C)},
-        }
-        self.last_evaluation = result
-        return result
-
-    def _eval_sim(self, n: int) -> Simulator:
-        if n not in self._eval_sims:
-            assert self._eval_factory is not None
-            self._eval_sims[n] = self._eval_factory(n)
-        return self._eval_sims[n]
-
+    # ------------------------------------------------- trainer hook (clip mining: env_mining)
     def after_iteration(self, iteration: int, policy_fn: PolicyFn) -> dict[str, float]:
         """Trainer hook: every ``eval_every`` iterations run :meth:`evaluate_clips` (which refreshes the
         sampling weights when ``hard_negative`` is on); returns scalars to log (empty otherwise)."""

@@ -71,181 +71,38 @@ it once per rollout chunk), or the teacher's statistics copied by
 ``update_normalizers`` per chunk, ``student_action`` in rollouts (eval mode, full quantizer
 depth, codebooks untouched) and ``distill_losses`` in training mode; it saves
 ``{"config": model.config, "state_dict": ...}``, which :func:`make_hybrid` loads back.
+
+Code layout: :class:`HybridParams` and the variant sets live in :mod:`mocap_hybrid_rvq.hybrid_params`, the loss
+terms in :mod:`mocap_hybrid_rvq.losses`; both are re-exported here.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import torch
 from mocap.checkpoint import CheckpointError, embedded_humanoid, load_checkpoint, save_checkpoint
 from mocap.interfaces import ActionSpace, Box, LatentSample, LatentSpace, MultiDiscrete
 from mocap.observations import imitation_goal_dim, proprioception_dim
-from mocap.rl.networks import ACTIVATIONS, mlp
+from mocap.rl.networks import mlp
 from mocap.rl.normalizer import RunningNormalizer
 from mocap.skeleton import Skeleton
 from mocap.state import Observations
 from mocap.quantizers import Quantizer, ResidualVQ, VectorQuantizer
-from mocap.bounds import LayerWidth
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from mocap_hybrid_rvq.hybrid_params import (
+    MARGINAL_VARIANTS,
+    RESIDUAL_VARIANTS,
+    SINGLE_VQ_VARIANTS,
+    VARIANTS,
+    HybridParams,
+    check_compatible,
+)
+from mocap_hybrid_rvq.losses import gaussian_kl, marginal_quantize, mm_loss, ramp, temporal_reg
 from torch import Tensor, nn
 
-Variant = Literal["hybrid", "continuous", "discrete", "discrete_plus", "hybrid_vq"]
-VARIANTS: tuple[str, ...] = ("hybrid", "continuous", "discrete", "discrete_plus", "hybrid_vq")
-#: variants whose latent adds the (stop-gradient) prior z_p to the quantized margin
-MARGINAL_VARIANTS = frozenset({"hybrid", "hybrid_vq"})
-#: variants with a residual (multi-level) quantizer
-RESIDUAL_VARIANTS = frozenset({"hybrid", "discrete_plus"})
-#: variants with a single codebook of ``single_codebook_size`` codes
-SINGLE_VQ_VARIANTS = frozenset({"discrete", "hybrid_vq"})
-
 CHECKPOINT_FORMAT = "mocap_hybrid_rvq/1"
-
-#: fields that fix the shapes of the weights; a checkpoint must agree with the spec on them
-ARCHITECTURE_FIELDS: tuple[str, ...] = (
-    "variant",
-    "latent_dim",
-    "num_codebooks",
-    "codebook_size",
-    "single_codebook_size",
-    "encoder_hidden",
-    "prior_hidden",
-    "decoder_hidden",
-    "activation",
-)
-
-
-class HybridParams(BaseModel):
-    """Parameters of the ``hybrid_rvq`` latent space ([P] paper value, [DEFAULT] ours)."""
-
-    model_config = ConfigDict(extra="forbid")
-
-    variant: Variant = Field(
-        "hybrid",
-        description="'hybrid' = MQ + RVQ ([P] ours); baselines: 'continuous' (PULSE-like Gaussian posterior/prior + KL), "
-        "'discrete' (one VQ on z, NCP), 'discrete_plus' (RVQ on z, no prior), 'hybrid_vq' (MQ + one VQ, App. A.1)",
-    )
-    # ------------------------------------------------------------------------------ latent
-    latent_dim: int = Field(32, ge=1, description="latent / code dimension D ([DEFAULT] 32 as PULSE; not in the paper)")
-    num_codebooks: int = Field(8, ge=1, description="RVQ depth N ([P] 8)")
-    codebook_size: int = Field(1024, ge=1, description="codes per RVQ codebook K ([P] 1024)")
-    single_codebook_size: int = Field(8192, ge=1, description="codes of the single VQ of 'discrete' / 'hybrid_vq' ([P] 8192)")
-    task_codebooks: int = Field(
-        1, ge=1, description="active codebooks M of the task action space ([P] 1: in-betweening, navigation; 2: HMD tracking)"
-    )
-    # --------------------------------------------------------------------------- quantizer
-    ema_decay: float = Field(0.99, gt=0.0, le=1.0, description="EMA decay of the codebooks ([DEFAULT] 0.99; [P] EMA is used)")
-    ema_eps: float = Field(1e-5, gt=0.0, description="Laplace smoothing of the EMA cluster sizes ([DEFAULT])")
-    dead_threshold: float = Field(
-        2.0, ge=0.0, description="codes with EMA cluster size below this are reset from the batch ([DEFAULT] 2.0; 0 disables)"
-    )
-    dead_threshold_mode: Literal["absolute", "relative"] = Field(
-        "absolute",
-        description="'absolute': dead_threshold is an EMA count per batch (vector-quantize-pytorch's threshold_ema_dead_code; "
-        "[P] names no threshold); 'relative': a fraction of the mean use per code, batch rows / codebook size (the same "
-        "meaning at every batch size)",
-    )
-    codebook_init: Literal["kmeans", "random"] = Field(
-        "kmeans", description="codebook initialization from the first training batch ([DEFAULT] k-means, as SoundStream)"
-    )
-    kmeans_iters: int = Field(10, ge=0, description="Lloyd iterations of the k-means initialization")
-    dropout: bool = Field(True, description="quantizer dropout during training ([P] used; RVQ variants only)")
-    dropout_per_sample: bool = Field(True, description="draw the depth M per sample ([DEFAULT], SoundStream) or once per batch")
-    dropout_prob: float = Field(1.0, ge=0.0, le=1.0, description="share of samples/batches with a random depth ([DEFAULT] 1.0)")
-    commitment: Literal["per_level", "total"] = Field(
-        "per_level", description="commitment loss: sum over levels of ‖r_n‖² ([DEFAULT]) or ‖y − sg(ŷ_q)‖² on the total"
-    )
-    # ---------------------------------------------------------------------------- networks
-    encoder_hidden: list[LayerWidth] = Field(default_factory=lambda: [512, 256], description="posterior MLP hidden sizes ([DEFAULT])")
-    prior_hidden: list[LayerWidth] = Field(default_factory=lambda: [512, 256], description="prior MLP hidden sizes ([DEFAULT])")
-    decoder_hidden: list[LayerWidth] = Field(default_factory=lambda: [512, 256], description="decoder MLP hidden sizes ([DEFAULT])")
-    activation: str = Field("silu", description="MLP activation ([DEFAULT] SiLU as PULSE): " + ", ".join(sorted(ACTIVATIONS)))
-    log_std_bounds: tuple[float, float] = Field((-5.0, 2.0), description="'continuous': clamp of the predicted log σ")
-    # ------------------------------------------------------------------------ observations
-    goal: Literal["rot", "keypoint"] = Field("rot", description="imitation goal layout of the teacher (sets the goal size)")
-    proprio_dim: int | None = Field(None, ge=1, description="override the proprioception size (default: from the skeleton)")
-    goal_dim: int | None = Field(None, ge=1, description="override the imitation-goal size (default: from the skeleton and `goal`)")
-    action_dim: int | None = Field(None, ge=1, description="override the action size (default: the skeleton's DoF count)")
-    normalizer: Literal["running", "teacher", "none"] = Field(
-        "running",
-        description="input normalization: 'running' = own running mean/std, fed by the distill trainer's "
-        "update_normalizers; 'teacher' = copy the teacher policy's statistics over [s^p | s^g] and freeze them "
-        "(init_from_teacher); 'none'",
-    )
-    obs_clip: float | None = Field(5.0, gt=0.0, description="clip of the normalized observations (None: none)")
-    # ------------------------------------------------------------------------------ losses
-    action_weight: float = Field(10.0, ge=0.0, description="weight of L_action ([P] Table 5: 10)")
-    reg_weight: float | None = Field(
-        None, ge=0.0, description="weight α of L_reg; None: [P] 0.05 (discrete, hybrid) or 0.005 (continuous)"
-    )
-    commit_weight: float = Field(1.0, ge=0.0, description="weight β of L_commit ([P] 1.0)")
-    mm_weight: tuple[float, float] = Field((0.1, 1.0), description="γ of L_mm, ramped start → end ([P] 0.1 → 1.0)")
-    kl_weight: tuple[float, float] = Field((0.05, 0.5), description="'continuous': KL weight start → end ([P] 0.05 → 0.5)")
-    ramp_fraction: float = Field(
-        1.0, gt=0.0, le=1.0, description="training progress at which the linear ramps reach their end ([DEFAULT]; not in paper)"
-    )
-
-    @model_validator(mode="after")
-    def _check(self) -> HybridParams:
-        if self.activation not in ACTIVATIONS:
-            raise ValueError(f"activation {self.activation!r} unknown; choose one of {sorted(ACTIVATIONS)}")
-        if self.variant in RESIDUAL_VARIANTS and self.task_codebooks > self.num_codebooks:
-            raise ValueError(f"task_codebooks ({self.task_codebooks}) exceeds num_codebooks ({self.num_codebooks})")
-        if self.variant in SINGLE_VQ_VARIANTS and self.task_codebooks != 1:
-            raise ValueError(f"variant {self.variant!r} has one codebook; task_codebooks must be 1")
-        if self.log_std_bounds[0] >= self.log_std_bounds[1]:
-            raise ValueError("log_std_bounds must be (low, high) with low < high")
-        return self
-
-    @property
-    def effective_reg_weight(self) -> float:
-        if self.reg_weight is not None:
-            return self.reg_weight
-        return 0.005 if self.variant == "continuous" else 0.05
-
-
-def ramp(start: float, end: float, progress: float, fraction: float = 1.0) -> float:
-    """Linear schedule: ``start`` at progress 0, ``end`` from progress ``fraction`` on."""
-    t = min(max(float(progress) / fraction, 0.0), 1.0)
-    return start + (end - start) * t
-
-
-def marginal_quantize(
-    z: Tensor, z_p: Tensor, quantizer: Quantizer, n_active: int | None = None, *, train: bool | None = None
-) -> tuple[Tensor, Tensor, Tensor, dict[str, Tensor]]:
-    """Alg. 1 lines 3–5: ``(z̄, ȳ, indices, losses)`` with y = z − sg(z_p), ȳ = Q(y), z̄ = ȳ + sg(z_p).
-
-    ȳ is straight-through (value ŷ_q, ∂ȳ/∂z = I); z̄ carries no gradient to z_p.
-    """
-    y = z - z_p.detach()
-    y_bar, indices, losses = quantizer(y, n_active, train=train)
-    return y_bar + z_p.detach(), y_bar, indices, losses
-
-
-def mm_loss(z_bar: Tensor, z_p: Tensor) -> Tensor:
-    """L_mm = mean ‖z̄ − z_p‖² with a **live** z_p (erratum 9.4-3): trains the prior toward z̄."""
-    return (z_bar - z_p).square().mean()
-
-
-def gaussian_kl(mu_q: Tensor, log_std_q: Tensor, mu_p: Tensor, log_std_p: Tensor) -> Tensor:
-    """Elementwise KL(N(μ_q, σ_q²) ‖ N(μ_p, σ_p²)) = log σ_p/σ_q + (σ_q² + (μ_q − μ_p)²)/(2σ_p²) − ½."""
-    var_q, var_p = (2 * log_std_q).exp(), (2 * log_std_p).exp()
-    return log_std_p - log_std_q + (var_q + (mu_q - mu_p).square()) / (2 * var_p) - 0.5
-
-
-def temporal_reg(x: Tensor, starts: Tensor) -> Tensor:
-    """mean ‖x_t − sg(x_{t−1})‖² over (t, n) pairs that do not cross an episode start.
-
-    ``x`` (T, N, D), ``starts`` (T, N) bool (step t is the first of an episode). Pairs with t = 0
-    (no predecessor in the chunk) or ``starts[t]`` are skipped; zero (with a graph) if none remain.
-    """
-    if x.shape[0] < 2:
-        return (x * 0).sum()
-    diff = (x[1:] - x[:-1].detach()).square().mean(-1)  # (T-1, N)
-    valid = (~starts[1:].bool()).to(diff.dtype)
-    return (diff * valid).sum() / valid.sum().clamp_min(1.0)
 
 
 @dataclass
@@ -613,21 +470,6 @@ def _extract_state(data: dict[str, Any], path: Path) -> tuple[dict[str, Any], di
     if data and all(isinstance(k, str) for k in data) and any(isinstance(v, Tensor) for v in data.values()):
         return data, config
     raise CheckpointError(f"{path}: no latent state_dict found (keys: {sorted(data)[:10]})")
-
-
-def check_compatible(params: HybridParams, config: dict[str, Any], dims: tuple[int, int, int], path: Path | str = "") -> None:
-    """Raise ``ValueError`` naming every architecture field / size where the checkpoint differs."""
-    stored = HybridParams.model_validate(config["params"])
-    problems = [
-        f"{name}: spec {getattr(params, name)!r}, checkpoint {getattr(stored, name)!r}"
-        for name in ARCHITECTURE_FIELDS
-        if getattr(params, name) != getattr(stored, name)
-    ]
-    for name, value in zip(("proprio_dim", "goal_dim", "action_dim"), dims):
-        if int(config[name]) != value:
-            problems.append(f"{name}: spec {value}, checkpoint {config[name]}")
-    if problems:
-        raise CheckpointError(f"{path}: checkpoint does not match the latent spec: " + "; ".join(problems))
 
 
 def load_hybrid(path: Path | str, map_location: str | torch.device = "cpu", params: HybridParams | None = None) -> HybridLatent:

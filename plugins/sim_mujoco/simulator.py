@@ -76,106 +76,48 @@ Props (all optional, per env, see :class:`MujocoParams`):
   :meth:`set_markers` stores per env, for rendering goals (:meth:`write_mjdata`);
 * ``terrain``: a height field shared by all envs (:mod:`mocap_sim_mujoco.terrain`) with
   :meth:`height_at` and :meth:`height_map` queries; without one the ground is the plane z = 0.
+
+Code layout: the parameter models live in :mod:`mocap_sim_mujoco.mujoco_params`, the state extraction in
+:mod:`mocap_sim_mujoco.readout` and the state access, props and terrain queries in :mod:`mocap_sim_mujoco.props`
+(mixins of :class:`MujocoSimulator`); every name is still importable from here.
 """
 
 from __future__ import annotations
 
 import copy
-import math
 from typing import Any
 import os
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import mujoco
 import numpy as np
 import torch
 from mujoco import rollout as mj_rollout
-from pydantic import BaseModel, ConfigDict, Field
 from torch import Tensor
 
-from mocap.bounds import ThreadCount
 from mocap.interfaces import Simulator
 from mocap.rotations import quat_apply, quat_conjugate, quat_normalize
 from mocap.skeleton import Skeleton
 from mocap.state import HumanoidState, SimState
-from mocap_sim_mujoco.actuators import ActuatorModel, ActuatorModelParams, explicit_stability_ratio, to_motor_actuators
+from mocap_sim_mujoco.actuators import ActuatorModel, explicit_stability_ratio, to_motor_actuators
 from mocap_sim_mujoco.mjcf import FLOOR_GEOM, ModelIndex, build_mjcf, model_index
-from mocap_sim_mujoco.terrain import Terrain, TerrainParams, height_map
+from mocap_sim_mujoco.mujoco_params import MujocoParams, TargetParams
+from mocap_sim_mujoco.props import SimulatorExtras, TargetState
+from mocap_sim_mujoco.readout import _CTRL, _FULL, _XFRC, StateReadout
+from mocap_sim_mujoco.terrain import Terrain, TerrainParams
 
 __all__ = ["MujocoParams", "MujocoSimulator", "TargetParams", "TargetState", "TerrainParams", "make_simulator"]
 
 TARGET_BODY = "target"
 TARGET_JOINT = "target_root"
 MARKER_PREFIX = "marker"
-_FULL = mujoco.mjtState.mjSTATE_FULLPHYSICS
-_CTRL = int(mujoco.mjtState.mjSTATE_CTRL)
-_XFRC = int(mujoco.mjtState.mjSTATE_XFRC_APPLIED)
-_KIN_FIELDS = 13  # framepos 3, framequat 4, framelinvel 3, frameangvel 3
-
-
-class TargetParams(BaseModel):
-    """A movable box standing on the ground in every env (the ``strike`` task's target)."""
-
-    model_config = ConfigDict(extra="forbid")
-
-    half_size: tuple[float, float, float] = Field((0.2, 0.2, 0.8), description="box half extents x, y, z, m")
-    mass: float = Field(20.0, gt=0.0, description="kg")
-    friction: float = Field(0.9, gt=0.0)
-    position: tuple[float, float] = Field((2.0, 0.0), description="initial xy of the box centre, m (it stands on the ground)")
-    fallen_angle: float = Field(45.0, gt=0.0, lt=180.0, description="tilt of the box's z axis beyond which it counts as fallen, deg")
-    rgba: tuple[float, float, float, float] = (0.9, 0.3, 0.2, 1.0)
-
-
-class MujocoParams(BaseModel):
-    """Parameters of the ``mujoco`` simulator (module docstring). Control period = ``timestep * substeps``."""
-
-    model_config = ConfigDict(extra="forbid")
-
-    timestep: float = Field(1.0 / 120.0, gt=0.0, le=0.05, description="physics step, s")
-    substeps: int = Field(4, ge=1, le=64, description="physics steps per control step (1/30 s by default)")
-    threads: ThreadCount | None = Field(None, description="rollout worker threads (default: all cores)")
-    chunk_size: int | None = Field(None, ge=1, description="envs per thread-pool task (default: MuJoCo's N / (10 threads))")
-    iterations: int = Field(20, ge=1, description="constraint solver iterations")
-    ls_iterations: int = Field(10, ge=1, description="solver line-search iterations")
-    self_collision: bool = Field(False, description="let body geoms collide with each other")
-    joint_limits: bool = Field(True, description="hinge ranges are hard limits (PD targets are clamped to them either way)")
-    max_qvel: float = Field(1000.0, gt=0.0, description="instability: any |qvel| (or |qpos|) entry above this (rad/s, m/s)")
-    max_qacc: float = Field(1.0e6, gt=0.0, description="instability: |change of qvel| / dt over a control step above this")
-    terrain: TerrainParams | None = Field(None, description="height-field ground (default: the plane z = 0)")
-    target: TargetParams | None = Field(None, description="a movable box per env (strike task)")
-    markers: int = Field(0, ge=0, le=256, description="visual-only marker spheres per env")
-    marker_radius: float = Field(0.05, gt=0.0)
-    marker_rgba: tuple[float, float, float, float] = (0.95, 0.15, 0.15, 1.0)
-    actuator_model: ActuatorModelParams | None = Field(
-        None,
-        description="VMP's actuator model (Eqs. 9-11: PD, Coulomb + viscous friction, torque-speed envelope) computed by the "
-        "simulator at every physics step on motor actuators (mocap_sim_mujoco.actuators); default None = MuJoCo position "
-        "actuators. The PD damping becomes explicit: needs timestep <= ~1/555 s on amp (refused above; use timestep 0.0016667, "
-        "substeps 20 for a 30 Hz control step)",
-    )
-
-    @property
-    def dt(self) -> float:
-        return self.timestep * self.substeps
-
-
-@dataclass
-class TargetState:
-    """State of the target prop of every env: pos (N, 3), rot (N, 4) wxyz, velocities (N, 3) world,
-    ``fallen`` (N,) bool (tilted beyond :attr:`TargetParams.fallen_angle`)."""
-
-    pos: Tensor
-    rot: Tensor
-    lin_vel: Tensor
-    ang_vel: Tensor
-    fallen: Tensor
 
 
 def _f(v: float) -> str:
     return f"{float(v):.9g}"
 
 
-class MujocoSimulator(Simulator):
+class MujocoSimulator(StateReadout, SimulatorExtras, Simulator):
     """``num_envs`` humanoids of ``skeleton`` in MuJoCo (module docstring for the design).
 
     Args:
@@ -554,213 +496,6 @@ class MujocoSimulator(Simulator):
         self._xfrc[ids] = 0.0
         self._kinematics(ids)
         self._cached = None
-
-    def _update_warmstart(self, bad: np.ndarray) -> None:
-        """Next step's solver warm start: the last substep's acceleration, ``(qvel_end - qvel_before) / h``
-        (what ``mj_step`` would carry over in ``qacc_warmstart``; ``rollout`` does not return it)."""
-        qv = slice(self._qv, self._qv + self.model.nv)
-        before = self._traj[:, -2, qv] if self.params.substeps > 1 else self._S[:, qv]
-        np.subtract(self._traj[:, -1, qv], before, out=self._warm)
-        self._warm *= 1.0 / self.params.timestep
-        if bad.any():
-            self._warm[bad] = 0.0
-
-    def _detect_unstable(self) -> np.ndarray:
-        """(N,) bool: the new state has a NaN/inf or an entry above ``max_qvel`` in magnitude, or
-        changed by more than ``max_qacc * dt`` over the control step (a mean ``|qacc|`` above
-        ``max_qacc``).
-
-        Whole state rows (qpos, qvel; time is kept at 0) are checked with max/min reductions:
-        qpos entries (m, rad) are far below ``max_qvel`` in a sane state and their change far below
-        ``max_qacc * dt``. NaN fails every comparison, so it is caught too. A blow-up grows by
-        orders of magnitude per substep, so the end of the step is where it shows."""
-        p = self.params
-        new = self._traj[:, -1]
-        lim = p.max_qacc * p.timestep * p.substeps
-        with np.errstate(invalid="ignore", over="ignore"):
-            ok = (new.max(axis=1) <= p.max_qvel) & (new.min(axis=1) >= -p.max_qvel)
-            d = new - self._S
-            ok &= (d.max(axis=1) <= lim) & (d.min(axis=1) >= -lim)
-        return ~ok
-
-    def _read_contacts(self) -> None:
-        N, B, D = self.num_envs, self.skeleton.num_bodies, self.skeleton.num_dofs
-        # mean over the substeps first: forces average to impulse / dt, and a mean contact count
-        # above zero means a contact in some substep
-        c = self._sens[:, :, : self._n_contact].mean(axis=1).reshape(N, self._num_partners, B, 4)
-        found = c[..., 0] > 0
-        if self._num_partners == 1:
-            self._body_contact[:] = found[:, 0]
-            self._ground_contact[:] = found[:, 0]
-            self._contact_force[:] = c[:, 0, :, 1:4]
-        else:
-            self._body_contact[:] = found.any(axis=1)
-            self._ground_contact[:] = found[:, self._ground_partners].any(axis=1)
-            self._contact_force[:] = c[..., 1:4].sum(axis=1)
-        self._dof_force[:] = self._sens[:, -1, self._n_contact : self._n_contact + D]
-
-    def _kinematics(self, ids: np.ndarray | None = None) -> None:
-        """Body frames and velocities of the current states (all envs, or rows ``ids``)."""
-        if ids is None:
-            self._pool.rollout(
-                self._kin_models,
-                self._kin_datas,
-                self._S,
-                self._ctrl1,
-                control_spec=_CTRL,
-                skip_checks=True,
-                nstep=1,
-                state=self._kin_state,
-                sensordata=self._kin_sens,
-                chunk_size=self._kin_chunk,
-            )
-            return
-        K = len(ids)
-        sens = np.zeros((K, 1, self._kin_model.nsensordata))
-        self._pool.rollout(
-            [self._kin_model] * K,
-            self._kin_datas,
-            np.ascontiguousarray(self._S[ids]),
-            np.zeros((K, 1, self.model.nu)),
-            control_spec=_CTRL,
-            skip_checks=True,
-            nstep=1,
-            state=np.zeros((K, 1, self.nstate)),
-            sensordata=sens,
-            chunk_size=None,
-        )
-        self._kin_sens[ids] = sens
-
-    def _tensor(self, a: np.ndarray) -> Tensor:
-        """A fresh tensor (never a view of simulator buffers) of ``a`` in the output dtype/device."""
-        out = torch.from_numpy(a.astype(self._np_dtype, order="C"))  # astype copies
-        return out if self.device.type == "cpu" and out.dtype == self.dtype else out.to(self.device, self.dtype)
-
-    def _build_state(self) -> SimState:
-        N, B = self.num_envs, self.skeleton.num_bodies
-        kin = self._kin_sens.reshape(N, B, _KIN_FIELDS)
-        body_pos = self._tensor(kin[..., 0:3])
-        body_rot = self._tensor(kin[..., 3:7])
-        body_lin_vel = self._tensor(kin[..., 7:10])
-        body_ang_vel = self._tensor(kin[..., 10:13])
-        return SimState(
-            root_pos=self._tensor(kin[:, 0, 0:3]),
-            root_rot=self._tensor(kin[:, 0, 3:7]),
-            root_lin_vel=self._tensor(kin[:, 0, 7:10]),
-            root_ang_vel=self._tensor(kin[:, 0, 10:13]),
-            dof_pos=self._tensor(self._S[:, self._dof_qpos]),
-            dof_vel=self._tensor(self._S[:, self._dof_qvel]),
-            body_pos=body_pos,
-            body_rot=body_rot,
-            body_lin_vel=body_lin_vel,
-            body_ang_vel=body_ang_vel,
-            contact_forces=self._tensor(self._contact_force),
-            body_contact=torch.from_numpy(self._body_contact.copy()).to(self.device),
-            unstable=torch.from_numpy(self._unstable.copy()).to(self.device),
-            dof_force=self._tensor(self._dof_force),
-        )
-
-    # --------------------------------------------------------------------- extras
-    @property
-    def ground_contact(self) -> Tensor:
-        """(N, B) bool: like ``SimState.body_contact`` but for the ground only (not props)."""
-        return torch.from_numpy(self._ground_contact.copy()).to(self.device)
-
-    @property
-    def qpos(self) -> np.ndarray:
-        """(N, nq) current MuJoCo ``qpos`` of every env (a copy)."""
-        return self._S[:, self._qp : self._qp + self.model.nq].copy()
-
-    @property
-    def qvel(self) -> np.ndarray:
-        """(N, nv) current MuJoCo ``qvel`` of every env (a copy)."""
-        return self._S[:, self._qv : self._qv + self.model.nv].copy()
-
-    def get_physics_state(self) -> np.ndarray:
-        """(N, nstate) copy of the full MuJoCo states (``mjSTATE_FULLPHYSICS``)."""
-        return self._S.copy()
-
-    def set_physics_state(self, env_ids: Tensor, states: np.ndarray, *, as_reset: bool = True) -> None:
-        """Write full MuJoCo states (K, nstate) (from :meth:`get_physics_state`) into envs ``env_ids``.
-
-        With ``as_reset`` (default) they also become the states an instability falls back to;
-        ``as_reset=False`` changes only the current state (e.g. to inject a perturbation)."""
-        ids = self._ids(env_ids)
-        self._S[ids] = states
-        self._S[ids, 0] = 0.0
-        if as_reset:
-            self._reset_S[ids] = states
-        self._after_set(ids)
-
-    def write_mjdata(self, env_id: int, data: mujoco.MjData) -> mujoco.MjData:
-        """Put env ``env_id`` (state and markers) into ``data`` of :attr:`model` and run ``mj_forward``
-        (for rendering or inspection)."""
-        mujoco.mj_setState(self.model, data, self._S[env_id], _FULL)
-        if self.params.markers:
-            data.mocap_pos[:] = self._markers[env_id]
-        mujoco.mj_forward(self.model, data)
-        return data
-
-    # ------------------------------------------------------------------------- props
-    def _need_target(self) -> None:
-        if self.params.target is None:
-            raise RuntimeError("this simulator has no target prop (set params.target)")
-
-    def set_target(self, env_ids: Tensor, pos: Tensor, rot: Tensor | None = None) -> None:
-        """Place the target box of envs ``env_ids`` (K,) at ``pos`` (K, 3) (box centre), ``rot`` (K, 4)
-        (default upright), at rest. Also becomes part of those envs' instability-reset state."""
-        self._need_target()
-        ids = self._ids(env_ids)
-        K = len(ids)
-        if K == 0:
-            return
-        q = np.zeros((K, 4))
-        q[:, 0] = 1.0
-        if rot is not None:
-            q = quat_normalize(rot.detach().to("cpu", torch.float64)).numpy().reshape(K, 4)
-        a, v = self._target_qpos, self._target_qvel
-        for buf in (self._S, self._reset_S):
-            rows = buf[ids]
-            rows[:, a : a + 3] = pos.detach().to("cpu", torch.float64).numpy().reshape(K, 3)
-            rows[:, a + 3 : a + 7] = q
-            rows[:, v : v + 6] = 0.0
-            buf[ids] = rows
-        self._cached = None
-
-    def target_state(self) -> TargetState:
-        """Pose, velocities (world) and fallen flag of every env's target box."""
-        self._need_target()
-        a, v = self._target_qpos, self._target_qvel
-        S = torch.from_numpy(self._S)
-        pos, rot = S[:, a : a + 3], quat_normalize(S[:, a + 3 : a + 7])
-        lin, ang = S[:, v : v + 3], quat_apply(rot, S[:, v + 3 : v + 6])  # free-joint angular velocity is local
-        up_z = 1.0 - 2.0 * (rot[:, 1] ** 2 + rot[:, 2] ** 2)  # z component of the box's z axis
-        fallen = up_z < math.cos(math.radians(self.params.target.fallen_angle))  # type: ignore[union-attr]
-        out = (pos, rot, lin, ang)
-        return TargetState(*(t.to(self.device, self.dtype) for t in out), fallen=fallen.to(self.device))
-
-    def set_markers(self, env_ids: Tensor, positions: Tensor) -> None:
-        """Marker positions (K, M, 3) of envs ``env_ids`` (visual only)."""
-        ids = self._ids(env_ids)
-        M = self.params.markers
-        self._markers[ids] = positions.detach().to("cpu", torch.float64).numpy().reshape(len(ids), M, 3)
-
-    @property
-    def markers(self) -> Tensor:
-        """(N, M, 3) marker positions."""
-        return self._tensor(self._markers)
-
-    # ------------------------------------------------------------------------ terrain
-    def height_at(self, xy: Tensor) -> Tensor:
-        """Ground height (...) at world points ``xy`` (..., 2) (0 on the plane)."""
-        if self.terrain is None:
-            return torch.zeros(xy.shape[:-1], dtype=xy.dtype if xy.is_floating_point() else self.dtype, device=xy.device)
-        return self.terrain.height_at(xy)
-
-    def height_map(self, center: Tensor, heading: Tensor, shape: tuple[int, int] = (11, 11), spacing: float = 0.1) -> Tensor:
-        """(N, H, W) ground heights on a grid around ``center`` (N, 2) turned by ``heading`` (N,)
-        (:meth:`mocap_sim_mujoco.terrain.Terrain.height_map`)."""
-        return height_map(self.height_at, center, heading, shape, spacing)
 
 
 def make_simulator(

@@ -77,6 +77,9 @@ reference frame.
 * termination: ``paper`` (PHC Relaxed Early Termination: mean distance of the checked bodies, all but
   the feet, > 0.5 m) or ``code`` (any checked body > 0.25 m after the first step);
 * episode 300 steps (10 s).
+
+Code layout: the parameter models live in :mod:`mocap_tasks.tracking_params`, the pure reward, goal and
+termination functions in :mod:`mocap_tasks.tracking_functions`; both are re-exported here.
 """
 
 from __future__ import annotations
@@ -88,25 +91,19 @@ import torch
 from mocap.interfaces import Task
 from mocap.metrics import mpjpe_global, mpjpe_local, success
 from mocap.observations import imitation_goal, imitation_goal_dim
-from mocap.rotations import (
-    heading_quat_inv,
-    quat_angle,
-    quat_apply,
-    quat_conjugate,
-    quat_mul,
-)
 from mocap.skeleton import Skeleton
 from mocap.state import HumanoidState, SimState, Trajectories
-from mocap.imitation_rewards import (
-    DEFAULT_SCALES,
-    DEFAULT_WEIGHTS,
-    TERMS,
-    ImitationReward,
-    RewardForm,
-    imitation_errors,
+from mocap.imitation_rewards import imitation_errors
+from mocap_tasks.common import TaskBase, resolve_body
+from mocap_tasks.tracking_functions import (
+    _like,
+    head_goal,
+    head_reward,
+    imitation_reward,
+    select_bodies,
+    tracking_failed,
 )
-from mocap_tasks.common import FallParams, TaskBase, resolve_body
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from mocap_tasks.tracking_params import HmdTrackingParams, MotionTrackingParams, VrTrackingParams
 from torch import Tensor
 
 __all__ = [
@@ -134,246 +131,6 @@ __all__ = [
 HEAD_NAMES: tuple[str, ...] = ("head", "Head")
 LEFT_HAND_NAMES: tuple[str, ...] = ("left_hand", "L_Hand")
 RIGHT_HAND_NAMES: tuple[str, ...] = ("right_hand", "R_Hand")
-
-#: PHC imitation reward: (position, rotation, linear velocity, angular velocity)
-PHC_WEIGHTS: tuple[float, float, float, float] = DEFAULT_WEIGHTS
-PHC_SCALES: tuple[float, float, float, float] = DEFAULT_SCALES
-#: Hybrid HMD head reward [DEFAULT of the digest]: (position, rotation, linear velocity, angular velocity)
-HMD_WEIGHTS: tuple[float, float, float, float] = (0.4, 0.3, 0.15, 0.15)
-HMD_SCALES: tuple[float, float, float, float] = (40.0, 2.0, 0.5, 0.1)
-
-
-
-# ------------------------------------------------------------------------------ pure functions
-def select_bodies(state: HumanoidState, bodies: Sequence[int] | Tensor) -> HumanoidState:
-    """``state`` with only the per-body fields of ``bodies`` (root pose and DoFs kept as they are),
-    so that heading-frame goals built on it use the real root."""
-    idx = torch.as_tensor(bodies, dtype=torch.long, device=state.body_pos.device)
-    return HumanoidState(
-        root_pos=state.root_pos,
-        root_rot=state.root_rot,
-        root_lin_vel=state.root_lin_vel,
-        root_ang_vel=state.root_ang_vel,
-        dof_pos=state.dof_pos,
-        dof_vel=state.dof_vel,
-        body_pos=state.body_pos[:, idx],
-        body_rot=state.body_rot[:, idx],
-        body_lin_vel=state.body_lin_vel[:, idx],
-        body_ang_vel=state.body_ang_vel[:, idx],
-    )
-
-
-def imitation_reward(
-    sim: HumanoidState,
-    ref: HumanoidState,
-    form: RewardForm = "paper",
-    weights: Sequence[float] = PHC_WEIGHTS,
-    scales: Sequence[float] = PHC_SCALES,
-) -> tuple[Tensor, dict[str, Tensor]]:
-    """PHC's ``r^g-imitation = sum_i w_i exp(-k_i e_i)`` over all bodies of ``sim``/``ref`` (the
-    imitator's :class:`mocap.imitation_rewards.ImitationReward`): ``(reward (N,), terms)``."""
-    return ImitationReward(form, tuple(weights), tuple(scales))(sim, ref)  # type: ignore[arg-type]
-
-
-def _head_rows(state: HumanoidState, head: int) -> tuple[Tensor, Tensor, Tensor, Tensor]:
-    return state.body_pos[:, head], state.body_rot[:, head], state.body_lin_vel[:, head], state.body_ang_vel[:, head]
-
-
-def head_reward(
-    sim: HumanoidState,
-    ref: HumanoidState,
-    head: int,
-    weights: Sequence[float] = HMD_WEIGHTS,
-    scales: Sequence[float] = HMD_SCALES,
-) -> tuple[Tensor, dict[str, Tensor]]:
-    """Hybrid HMD reward on the head (module doc): ``sum_i w_i exp(-k_i |d_i|^2)``, ``(reward, terms)``."""
-    p, q, v, w = _head_rows(sim, head)
-    rp, rq, rv, rw = _head_rows(ref, head)
-    errors = {
-        "pos": (p - rp).square().sum(-1),
-        "rot": quat_angle(quat_mul(q, quat_conjugate(rq))).square(),
-        "vel": (v - rv).square().sum(-1),
-        "ang_vel": (w - rw).square().sum(-1),
-    }
-    terms = {name: torch.exp(-k * errors[name]) for name, k in zip(TERMS, scales)}
-    total = sum(wt * terms[name] for name, wt in zip(TERMS, weights))
-    return total, terms  # type: ignore[return-value]
-
-
-def head_goal(state: HumanoidState, refs: Sequence[HumanoidState], head: int) -> Tensor:
-    """(N, 13 F) Hybrid's head goal for the reference frames ``refs`` (module doc), current minus reference."""
-    h_inv = heading_quat_inv(state.root_rot)
-    h = quat_conjugate(h_inv)
-    p, q, v, w = _head_rows(state, head)
-    parts = []
-    for ref in refs:
-        rp, rq, rv, rw = _head_rows(ref, head)
-        dq = quat_mul(quat_mul(h_inv, quat_mul(q, quat_conjugate(rq))), h)
-        dq = torch.where(dq[..., :1] < 0, -dq, dq)  # canonical: w >= 0
-        parts += [quat_apply(h_inv, p - rp), quat_apply(h_inv, v - rv), dq, quat_apply(h_inv, w - rw)]
-    return torch.cat(parts, dim=-1)
-
-
-def tracking_failed(
-    dist: Tensor, rule: Literal["mean", "any"], threshold: float, age: Tensor | None = None, grace: int = 0
-) -> Tensor:
-    """(N,) bool from (N, K) distances to the reference: ``mean`` or ``any`` of them above ``threshold``,
-    never while ``age`` (steps of the state since the reset) is at most ``grace``."""
-    if rule == "mean":
-        failed = dist.mean(-1) > threshold
-    elif rule == "any":
-        failed = (dist > threshold).any(-1)
-    else:
-        raise ValueError(f"unknown termination rule {rule!r}; choose 'mean' or 'any'")
-    if age is not None and grace > 0:
-        failed = failed & (age.to(failed.device) > grace)
-    return failed
-
-
-def _like(ref: HumanoidState, state: HumanoidState) -> HumanoidState:
-    """The fields of ``ref`` in ``state``'s dtype and device."""
-    dt, dev = state.body_pos.dtype, state.body_pos.device
-    return HumanoidState(
-        **{
-            k: getattr(ref, k).to(dev, dt)
-            for k in (
-                "root_pos",
-                "root_rot",
-                "root_lin_vel",
-                "root_ang_vel",
-                "dof_pos",
-                "dof_vel",
-                "body_pos",
-                "body_rot",
-                "body_lin_vel",
-                "body_ang_vel",
-            )
-        }
-    )
-
-
-# ---------------------------------------------------------------------------------- params
-def _no_fall() -> FallParams:
-    return FallParams(early_termination=False)
-
-
-_FALL_DESCRIPTION = (
-    "fall termination, off by default (imitation terminates on the tracking error only; a reference may lie on "
-    "the ground)"
-)
-
-
-class _TrackingParams(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
-    seed: int = Field(
-        0, description="seed of the task's generator (starts drawn without the env); a factory `seed` overrides it"
-    )
-    success_threshold: float = Field(
-        0.5, gt=0.0, description="m: an episode fails once the mean error of the success bodies exceeds it ([P] 0.5)"
-    )
-    fall: FallParams = Field(default_factory=_no_fall, description=_FALL_DESCRIPTION)
-
-
-class VrTrackingParams(_TrackingParams):
-    """Parameters of ``vr_tracking`` (module docstring)."""
-
-    bodies: tuple[str, str, str] | None = Field(
-        None,
-        description="the tracked headset and controllers: (head, left hand, right hand) body names; None: the "
-        "skeleton's (amp: head, left_hand, right_hand; smpl: Head, L_Hand, R_Hand)",
-    )
-    goal: Literal["rot", "keypoint"] = Field(
-        "rot", description="per point: 'rot' = PULSE s^g-vr, 24 dims ([P], [CODE] 72 for 3 points); 'keypoint' = 9 dims"
-    )
-    sixd: Literal["zhou", "tan_norm"] = Field("zhou", description="6-D rotation convention of the goal")
-    reward_form: RewardForm = Field(
-        "code",
-        description="PHC+ imitation reward errors: [CODE] 'code' = exp(-k mean squared component), the default: what PHC, "
-        "PULSE and the committed imitator trained with (r_pos 0.92 at a 5 cm error with k = 100); [P] 'paper' = "
-        "exp(-k ||x^ - x||) as printed (mean per-body norm; r_pos 0.007 at 5 cm with the same k)",
-    )
-    reward_bodies: Literal["all", "tracked"] = Field(
-        "all", description="bodies the reward scores: 'all' ([P] the same full-body reward as PHC+) or the 3 'tracked'"
-    )
-    reward_weights: tuple[float, float, float, float] = Field(
-        PHC_WEIGHTS, description="(position, rotation, velocity, angular velocity) weights ([P] Table 4)"
-    )
-    reward_scales: tuple[float, float, float, float] = Field(
-        PHC_SCALES, description="(position, rotation, velocity, angular velocity) kernel scales k ([P] Table 4)"
-    )
-    termination: Literal["paper", "code"] = Field(
-        "code",
-        description="tracking termination: [CODE] 'code' = any of the 3 points farther than 0.25 m after the first "
-        "step; [P] defines none for training, 'paper' = its success criterion, mean of the 3 errors > 0.5 m",
-    )
-    termination_threshold: float | None = Field(None, gt=0.0, description="m; None: 0.25 (code) or 0.5 (paper)")
-    episode_steps: int = Field(300, ge=1, description="time limit, control steps ([CODE] 300 = 10 s)")
-
-    @model_validator(mode="after")
-    def _weights(self) -> VrTrackingParams:
-        if any(w < 0 for w in self.reward_weights) or sum(self.reward_weights) <= 0:
-            raise ValueError(f"reward_weights must be >= 0 and not all 0, got {self.reward_weights}")
-        return self
-
-
-class HmdTrackingParams(_TrackingParams):
-    """Parameters of ``hmd_tracking`` (module docstring)."""
-
-    head: str | None = Field(None, description="the head body; None: the skeleton's (amp: head, smpl: Head)")
-    frames: int = Field(5, ge=1, description="reference frames observed, t+1 .. t+frames ([P] the next and 4 more)")
-    reward_weights: tuple[float, float, float, float] = Field(
-        HMD_WEIGHTS,
-        description="(position, rotation, velocity, angular velocity) weights; [P] gives none, [DEFAULT] of the digest",
-    )
-    reward_scales: tuple[float, float, float, float] = Field(
-        HMD_SCALES, description="kernel scales k of exp(-k |d|^2) ([DEFAULT]: Eq. 10's 40, 2, 0.5, 0.1)"
-    )
-    termination_threshold: float = Field(1.0, gt=0.0, description="m: head farther than this terminates ([P] 1 m)")
-    episode_steps: int = Field(150, ge=1, description="time limit, control steps ([P] 5 s = 150)")
-
-    @model_validator(mode="after")
-    def _weights(self) -> HmdTrackingParams:
-        if any(w < 0 for w in self.reward_weights) or sum(self.reward_weights) <= 0:
-            raise ValueError(f"reward_weights must be >= 0 and not all 0, got {self.reward_weights}")
-        return self
-
-
-class MotionTrackingParams(_TrackingParams):
-    """Parameters of ``motion_tracking`` (module docstring)."""
-
-    goal: Literal["rot", "keypoint"] = Field(
-        "rot", description="imitation goal: 'rot' = PHC s^g-rot (24 B dims), 'keypoint' = s^g-kp (9 B)"
-    )
-    sixd: Literal["zhou", "tan_norm"] = Field("zhou", description="6-D rotation convention of the goal")
-    reward_form: RewardForm = Field(
-        "code",
-        description="imitation reward errors: [CODE] 'code' = exp(-k mean squared component), the default: what the "
-        "committed imitator trained with (r_pos 0.92 at 5 cm, k = 100); [P] 'paper' = exp(-k ||x^ - x||) as printed "
-        "(mean per-body norm; r_pos 0.007 at 5 cm)",
-    )
-    reward_weights: tuple[float, float, float, float] = Field(
-        PHC_WEIGHTS, description="(position, rotation, velocity, angular velocity) weights (PHC/PULSE Table 4)"
-    )
-    reward_scales: tuple[float, float, float, float] = Field(
-        PHC_SCALES, description="(position, rotation, velocity, angular velocity) kernel scales k (PHC/PULSE Table 4)"
-    )
-    termination: Literal["paper", "code"] = Field(
-        "paper",
-        description="[P] 'paper' = mean distance of the checked bodies > 0.5 m (Relaxed Early Termination); [CODE] "
-        "'code' = any checked body > 0.25 m after the first step",
-    )
-    termination_threshold: float | None = Field(None, gt=0.0, description="m; None: 0.5 (paper) or 0.25 (code)")
-    termination_exclude: tuple[str, ...] | None = Field(
-        None, description="bodies not checked by the termination (None: the skeleton's feet, as PHC)"
-    )
-    episode_steps: int = Field(300, ge=1, description="time limit, control steps (10 s)")
-
-    @model_validator(mode="after")
-    def _weights(self) -> MotionTrackingParams:
-        if any(w < 0 for w in self.reward_weights) or sum(self.reward_weights) <= 0:
-            raise ValueError(f"reward_weights must be >= 0 and not all 0, got {self.reward_weights}")
-        return self
 
 
 # ------------------------------------------------------------------------------------ tasks

@@ -1,0 +1,157 @@
+"""Parameters of the ``pmcp`` trainer (:mod:`mocap_phc.pmcp`): :class:`PMCPParams`, the fail-state
+recovery primitive's :class:`RecoveryPhaseParams` with its optional get-up phase
+(:class:`GetupPhaseParams`), and the composer forms (``ComposerForm``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from mocap.rl.ppo import PPOParams
+from mocap_phc.recovery import FailStateParams
+
+ComposerForm = Literal["weighted_sum", "multiplicative"]
+
+
+# ------------------------------------------------------------------------------------ params
+def _recovery_fail_default() -> FailStateParams:
+    return FailStateParams(fall_init_prob=0.3, far_init_prob=0.3, recovery_episode_prob=0.5)
+
+
+def _getup_fail_default() -> FailStateParams:
+    return FailStateParams(fall_init_prob=1.0, far_init_prob=0.0, recovery_episode_prob=0.0)
+
+
+def _getup_imitator_default() -> dict[str, Any]:
+    return {"amp": True, "task_reward_weight": 0.0, "amp_reward_weight": 1.0}
+
+
+class GetupPhaseParams(BaseModel):
+    """[C]'s first P(F) phase (``getup_schedule`` before ``getup_udpate_epoch``; digest phc §4.4): pure
+    AMP get-up learning from fallen states. The paper does not mention it; the official code runs
+    it for about 8e4 of its ~1e5 epochs before the point-goal phase."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    env_steps: int = Field(2_000_000, ge=1, description="env-step budget of the get-up phase (rounded up to whole PPO iterations)")
+    fail_states: FailStateParams = Field(
+        default_factory=_getup_fail_default,
+        description="episode starts ([C] phase 1: every reset from a stored fallen state, fallInitProb 1, no far starts, "
+        "no bonus recovery episodes; each start has the recovery window, after which tracking failures end the episode)",
+    )
+    imitator: dict[str, Any] = Field(
+        default_factory=_getup_imitator_default,
+        description="imitator params changed for this phase only (validated as the imitator's params): by default the AMP "
+        "reward on with task weight 0 and AMP weight 1 ([C] phase 1); e.g. amp_hidden for a CPU-sized discriminator. "
+        "The discriminator starts fresh and is not carried into the point-goal phase",
+    )
+
+
+class RecoveryPhaseParams(BaseModel):
+    """The fail-state recovery primitive P(F) (PHC §4.4 / digest phc §4.4, §4.6)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    clips: list[str] = Field(
+        default_factory=lambda: ["walk", "run", "getup"],
+        description="clips of P(F)'s training set: every clip whose name contains one of these strings ([P] Q^loco, a "
+        "hand-picked locomotion subset of AMASS; here the bundled walk/run clips plus the get-up clips [I])",
+    )
+    env_steps: int = Field(2_000_000, ge=1, description="env-step budget of P(F) (rounded up to whole PPO iterations)")
+    fail_states: FailStateParams = Field(
+        default_factory=_recovery_fail_default,
+        description="episode starts of P(F): fallen / far starts and bonus recovery episodes ([C] phase 2: fallInitProb 0.3, "
+        "recoveryEpisodeProb 0.5; [P] far starts 2-5 m); [C]'s phase 1 is ``getup``",
+    )
+    getup: GetupPhaseParams | None = Field(
+        None,
+        description="first train P(F) in [C]'s AMP-only get-up phase (fallen starts only), then the point-goal phase "
+        "above starts from its weights; None: no get-up phase ([P] mentions none)",
+    )
+    composer_fail_states: FailStateParams | None = Field(
+        default_factory=_recovery_fail_default,
+        description="episode starts while training the composer ([P] 'fail-state recovery training is interleaved during "
+        "composer training'); None: RSI only",
+    )
+
+
+def _composer_ppo_default() -> PPOParams:
+    return PPOParams(log_std_init=-2.9, learn_std=False)
+
+
+class PMCPParams(BaseModel):
+    """Parameters of the ``pmcp`` trainer ([P] PHC paper, [C] official code, [I] this implementation)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    ppo: PPOParams = Field(
+        default_factory=PPOParams,
+        description="PPO of every primitive; its total_env_steps is the budget of the whole primitive phase, summed over "
+        "the primitives ([I]; [P] trains each primitive 'until convergence')",
+    )
+    primitive_env_steps: int | None = Field(
+        None,
+        ge=1,
+        description="env-step budget of one primitive (rounded up to whole PPO iterations); None: whatever is left of "
+        "ppo.total_env_steps ([I])",
+    )
+    primitive0: Path | None = Field(
+        None,
+        description="a trained single-primitive imitator (a policy.pt of this imitator's observation and action, the "
+        "network sizes of ppo) used as primitive 0: not trained, only evaluated on every clip to find the hard set of "
+        "primitive 1 ([I]; PHC+ on top of an existing PHC; [C] likewise starts PMCP from a trained imitator's checkpoint). "
+        "Relative to the spec file",
+    )
+    max_primitives: int = Field(
+        3, ge=1, description="most imitation primitives ([P] 3 imitation primitives + the recovery primitive; [C] num_prim 4)"
+    )
+    eval_every: int = Field(
+        50,
+        ge=1,
+        description="PPO iterations between the plateau evaluations of a primitive (every clip of its set from frame 0, "
+        "deterministic); reuses the env's hard-negative evaluation when both fall on one iteration ([C] evaluates every "
+        "few thousand epochs)",
+    )
+    plateau_evals: int = Field(
+        5,
+        ge=0,
+        description="freeze a primitive after this many consecutive evaluations without improvement (PlateauTracker: no "
+        "more clips succeeding than ever before and no clip succeeding for the first time); 0: train for the whole budget "
+        "([P] 'until the success rate no longer increases'; [C] forward_pmcp uses the last 5 evaluations)",
+    )
+    stop_on_success: bool = Field(
+        True, description="freeze a primitive as soon as an evaluation succeeds on every clip of its set ([I])"
+    )
+    init: Literal["copy", "fresh"] = Field(
+        "copy",
+        description="primitive k+1 starts from primitive k's weights, critic and normalizer ('copy': [P] variant (b) weight "
+        "sharing, [C] forward_pmcp copies actors.k into actors.k+1, value function continued) or from a fresh random init "
+        "('fresh'; [P] variant (a) adds PNN lateral connections, not implemented)",
+    )
+    composer_form: ComposerForm = Field(
+        "multiplicative",
+        description="how the composer's weights w mix the frozen primitives' means mu_i: 'multiplicative' = "
+        "sum_i c_i mu_i / sum_i c_i with c_i = relu(w_i) + composer_eps ([P] Eq. 5/6, MCP with the primitives' equal "
+        "fixed sigma) or 'weighted_sum' = sum_i relu(w_i) mu_i, unnormalized ([C] ReLU composer output)",
+    )
+    composer_eps: float = Field(
+        1e-6, ge=0.0, description="multiplicative form: added to every relu(w_i) so that the normalizer never vanishes ([I])"
+    )
+    composer_init_weight: float | None = Field(
+        None,
+        description="initial composer output (the action head's bias) for every primitive; None: 1/K, i.e. the mean of the "
+        "primitives' means in both forms ([I]; [C] starts from a random ReLU MLP)",
+    )
+    recovery: RecoveryPhaseParams | None = Field(
+        None,
+        description="train the fail-state recovery primitive P(F) after the imitation primitives (initialized from the last "
+        "one, point-goal reward while far, fallen/far starts) and give the composer K+1 primitives ([P] 3 + P(F)); needs "
+        "the imitator's recovery_goal (the observation switch of PHC Eq. 3). None: no recovery primitive",
+    )
+    composer_ppo: PPOParams = Field(
+        default_factory=_composer_ppo_default,
+        description="PPO of the composer on all clips (its actor_hidden / activation are the composer MLP: [C] [1024, 512], "
+        "ReLU); default exploration on the weights with fixed sigma = exp(-2.9) ([C])",
+    )

@@ -1,0 +1,47 @@
+"""bench/imitator_ab.py: arms side by side; the training tail averages only the last iterations of the imitator stage."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from conftest import load_bench
+
+
+@pytest.fixture(scope="module")
+def ab():
+    return load_bench("imitator_ab")
+
+
+def _arm(tmp: Path, name: str, clips: int, lengths: list[float]) -> str:
+    work = tmp / name
+    (work / "runs" / "tts").mkdir(parents=True)
+    rows = [{"stage": "imitator", "step": i + 1, "episode/length": v, "episode/success": 0.5} for i, v in enumerate(lengths)]
+    rows.append({"stage": "eval", "step": 0, "episode/length": 1e9})  # another stage: ignored
+    (work / "runs" / "tts" / "metrics.jsonl").write_text("\n".join(json.dumps(r) for r in rows) + "\n")
+    point = {"minutes": 15.0, "env_steps": 2_000_000, "clips_tracked": clips, "clips_total": 15}
+    point |= {"mpjpe_g_succ_mm": 80.0, "mpjpe_g_all_mm": 140.0, "tracked": ["walk"]}
+    result = tmp / f"{name}.json"
+    meta = {"spec": "s.yaml", "overrides": [f"x={name}"], "minutes": 15, "load_avg_at_end_of_training": [2.1, 2.0, 1.9]}
+    result.write_text(json.dumps({**meta, "points": [point]}))
+    return f"{name}={result}:{work}"
+
+
+def test_arms_table_and_training_tail(ab, tmp_path: Path):
+    out = tmp_path / "ab.json"
+    start = tmp_path / "eval.json"
+    aggregate = {"succeeded": 9, "total": 15, "mpjpe_g_succ": 87.0, "mpjpe_g": 147.0}
+    start.write_text(json.dumps({"aggregate": aggregate, "clips": {"walk": {"success": True}, "spin": {"success": False}}}))
+    lengths = [10.0] * 5 + [100.0] * 20  # only the last 20 iterations count
+    assert ab.main(["--arm", _arm(tmp_path, "a", 9, lengths), "--arm", _arm(tmp_path, "b", 10, [50.0]), "--start", str(start), "--out", str(out)]) == 0
+    result = json.loads(out.read_text())
+    a, b = result["arms"]
+    assert a["training_last_20_iterations"]["episode/length"] == pytest.approx(100.0)
+    assert a["training_last_20_iterations"]["iterations"] == 20
+    assert b["training_last_20_iterations"]["episode/length"] == pytest.approx(50.0)
+    assert result["start"]["clips_tracked"] == 9 and result["start"]["tracked"] == ["walk"]
+    md = out.with_suffix(".md").read_text()
+    assert "| a | `x=a` | 15.0 | 2.00M | 9/15 | 80.0 | 140.0 | 100.0 | 0.50 | 2.10 |" in md
+    assert "Start: 9/15 clips, MPJPE-g 87.0 mm" in md
+    assert out.with_suffix(".png").stat().st_size > 0
