@@ -83,7 +83,7 @@ from mocap.checkpoint import load_checkpoint, save_checkpoint
 from mocap.faults import FaultGuard
 from mocap.rng import rng_state, set_rng_state
 from mocap.hooks import hookimpl
-from mocap.interfaces import Imitator, Simulator, StageResult, Trainer
+from mocap.interfaces import DistillableLatent, Imitator, LatentSpace, Simulator, StageResult, Trainer
 from mocap.hard_negatives import failure_weights
 from mocap.pipeline import StageFailed
 from mocap.progress import IterationProgress
@@ -116,11 +116,11 @@ class DistillTrainer(Trainer):
         p = self.params
         if p.torch_threads is not None:
             torch.set_num_threads(p.torch_threads)
-        device = torch.device(getattr(ctx, "device", "cpu"))
+        device = torch.device(ctx.device)
         workdir = Path(ctx.workdir)
         workdir.mkdir(parents=True, exist_ok=True)
         ckpt_path = workdir / CHECKPOINT_NAME
-        spec_yaml = ctx.spec_yaml() if callable(getattr(ctx, "spec_yaml", None)) else None
+        spec_yaml = ctx.spec_yaml()
 
         torch.manual_seed(ctx.seed)
         np.random.seed(ctx.seed % 2**32)
@@ -136,15 +136,14 @@ class DistillTrainer(Trainer):
         if p.label == "pd_targets":
             teacher = PDTargetTeacher(teacher)
         student = ctx.stage_component("latent")
-        for method in ("student_action", "distill_losses"):
-            if not callable(getattr(student, method, None)) or not isinstance(student, torch.nn.Module):
-                raise ValueError(
-                    f"the latent space {type(student).__name__} cannot be distilled: it must be an nn.Module with "
-                    "student_action and distill_losses (mocap.interfaces.DistillableLatent)"
-                )
+        if not (isinstance(student, LatentSpace) and isinstance(student, DistillableLatent)):
+            raise ValueError(
+                f"the latent space {type(student).__name__} cannot be distilled: it must be a mocap.interfaces.LatentSpace "
+                "with student_action and distill_losses (mocap.interfaces.DistillableLatent)"
+            )
         student.to(device)
         motion_set = ctx.build("motions").load(skeleton)
-        for path, reason in getattr(motion_set, "skipped", []):
+        for path, reason in motion_set.skipped:
             ctx.console.print(f"[yellow]skipped[/] {path}: {reason}")
         lib = MotionLibrary(motion_set, skeleton)
         sim = ctx.build("simulator", skeleton=skeleton, num_envs=p.num_envs, seed=ctx.seed)
@@ -190,12 +189,10 @@ class DistillTrainer(Trainer):
                 ctx.console.print(f"distill: the checkpoint was written by {int(ck.get('world_size', 1))} process(es), resuming with {world}")
         else:
             ctx.log.truncate_after(0)
-            init = getattr(student, "init_from_teacher", None)
-            if callable(init):
-                try:
-                    init(teacher)
-                except ValueError as exc:  # a student/teacher mismatch the spec has to fix
-                    raise DistillError(f"latent {type(student).__name__}: {exc}") from None
+            try:
+                student.init_from_teacher(teacher)
+            except ValueError as exc:  # a student/teacher mismatch the spec has to fix
+                raise DistillError(f"latent {type(student).__name__}: {exc}") from None
             episodes.reset_all()
         self._check_dims(teacher, student, episodes, device)
 
@@ -220,7 +217,7 @@ class DistillTrainer(Trainer):
                     "iteration": iteration,
                     "env_steps": env_steps,
                     "student": {k: v.detach().cpu() if isinstance(v, Tensor) else v for k, v in student.state_dict().items()},
-                    "latent_config": getattr(student, "config", None),
+                    "latent_config": student.config,
                     "optimizer": optimizer.state_dict(),
                     "episodes": episodes.state_dict(),
                     "generator": gen.get_state(),
@@ -363,7 +360,7 @@ class DistillTrainer(Trainer):
         student.eval()
         # optional RL term (e.g. PULSE's Table 3 ablation): the student's hook acts, is rewarded, and
         # adds per-sample tensors (advantages, ...) to the chunk's ``extra`` for its distill_losses
-        rl_hook = student.rl_hook() if callable(getattr(student, "rl_hook", None)) else None
+        rl_hook = student.rl_hook()
         if rl_hook is not None and p.act_with != "student":
             raise DistillError("the latent's RL term is on-policy: it needs act_with: student")
         rl_info: list[dict[str, Tensor]] = []
@@ -440,9 +437,8 @@ class DistillTrainer(Trainer):
         p = self.params
         guard = guard or FaultGuard(0, "distill")
         N = teacher_out.shape[1]
-        update_norm = getattr(student, "update_normalizers", None)
-        if callable(update_norm):  # data-parallel: the statistics of all ranks' chunks, merged exactly
-            dist.sync_normalizers(student, lambda: update_norm(chunk))
+        # data-parallel: the statistics of all ranks' chunks, merged exactly
+        dist.sync_normalizers(student, lambda: student.update_normalizers(chunk))
         student.train()
         sums: dict[str, float] = {}
         steps = 0

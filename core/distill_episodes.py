@@ -6,7 +6,6 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
 import torch
 from torch import Tensor
 
@@ -14,12 +13,12 @@ from mocap.fail_states import fail_starts, generate_fall_states
 from mocap.hard_negatives import FailureTracker
 from mocap.interfaces import Simulator
 from mocap.motion.library import MotionLibrary, grid_start_times
-from mocap.state import HUMANOID_FIELDS, HumanoidState, MotionFrames, SimState
+from mocap.sim_snapshot import load_sim_state, save_sim_state
+from mocap.state import HumanoidState, MotionFrames, SimState
 
 if TYPE_CHECKING:  # pragma: no cover
     from mocap.distill import DistillParams
 
-_HUMANOID_FIELDS = HUMANOID_FIELDS
 
 
 class DistillEpisodes:
@@ -149,11 +148,7 @@ class DistillEpisodes:
             "recovery_left": self.recovery_left.cpu().clone(),
             **self.failures.state_dict(),
         }
-        if hasattr(self.sim, "get_physics_state"):
-            sd["physics"] = torch.from_numpy(np.array(self.sim.get_physics_state(), dtype=np.float64, copy=True))
-        else:  # any Simulator: the kinematic state it can be reset to
-            s = self.sim.state
-            sd["sim_state"] = {k: getattr(s, k).cpu().clone() for k in _HUMANOID_FIELDS}
+        sd.update(save_sim_state(self.sim))
         return sd
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
@@ -169,13 +164,7 @@ class DistillEpisodes:
         if "recovery_left" in state:
             self.recovery_left = state["recovery_left"].to(dev).clone()
         self.failures.load_state_dict(state)
-        ids = torch.arange(self.num_envs)
-        if "physics" in state and hasattr(self.sim, "set_physics_state"):
-            self.sim.set_physics_state(ids, np.array(state["physics"].numpy(), dtype=np.float64, copy=True))
-        elif "sim_state" in state:
-            self.sim.reset(ids, HumanoidState(**{k: v.to(dev) for k, v in state["sim_state"].items()}))
-        else:
-            raise ValueError("the checkpoint has no simulator state usable by this simulator")
+        load_sim_state(self.sim, torch.arange(self.num_envs), state, dev)
 
 
 __all__ = ["DistillEpisodes"]

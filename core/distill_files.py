@@ -11,6 +11,7 @@ import torch
 from torch import Tensor
 
 from mocap.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from mocap.interfaces import LatentSpace
 
 CHECKPOINT_FORMAT = "mocap.distill/1"
 CHECKPOINT_NAME = "distill.pt"
@@ -23,7 +24,7 @@ def save_latent(path: Path, latent: torch.nn.Module, extra: dict[str, Any] | Non
     state = {k: v.detach().cpu() if isinstance(v, Tensor) else v for k, v in latent.state_dict().items()}
     save_checkpoint(
         Path(path),
-        {"format": LATENT_FORMAT, "config": getattr(latent, "config", None), "state_dict": state, "extra": extra or {}},
+        {"format": LATENT_FORMAT, "config": latent.config if isinstance(latent, LatentSpace) else None, "state_dict": state, "extra": extra or {}},
         spec_yaml=spec_yaml,
     )
 
@@ -42,4 +43,33 @@ def load_latent_state(path: Path, map_location: str | torch.device = "cpu") -> d
     raise CheckpointError(f"{path}: not a distilled latent-space file (format {fmt!r}, expected {LATENT_FORMAT!r} or {CHECKPOINT_FORMAT!r})")
 
 
-__all__ = ["CHECKPOINT_FORMAT", "CHECKPOINT_NAME", "LATENT_FORMAT", "LATENT_NAME", "load_latent_state", "save_latent"]
+def check_latent_loaded(latent: torch.nn.Module, path: Path, name: str) -> None:
+    """The framework's check that a latent factory handed ``path`` returned the weights in it.
+
+    A factory receives the checkpoint as a path and loads it itself; one that ignored it would
+    evaluate random weights without a word. Called whenever a latent space is built from a
+    checkpoint; a file this module does not read (a plugin's own format, e.g. VMP's) is not checked.
+    Raises :class:`~mocap.plugins.PluginError` naming the tensors that differ.
+    """
+    try:
+        saved = load_latent_state(Path(path))
+    except (CheckpointError, KeyError):
+        return
+    mine = latent.state_dict()
+    differ = []
+    for key, value in saved["state_dict"].items():
+        if not isinstance(value, Tensor):
+            continue
+        got = mine.get(key)
+        if not isinstance(got, Tensor) or got.shape != value.shape or not torch.equal(got.detach().cpu().to(value.dtype), value.cpu()):
+            differ.append(key)
+    if differ:
+        from mocap.plugins import PluginError
+
+        raise PluginError(
+            f"latent space {name!r}: its factory was given the checkpoint {path} but returned other weights "
+            f"({', '.join(differ[:3])}{', ...' if len(differ) > 3 else ''}); a latent factory must load `checkpoint` (docs/plugins.md)"
+        )
+
+
+__all__ = ["CHECKPOINT_FORMAT", "CHECKPOINT_NAME", "LATENT_FORMAT", "LATENT_NAME", "check_latent_loaded", "load_latent_state", "save_latent"]

@@ -11,6 +11,7 @@ from typing import Any, Callable
 
 import torch
 
+from mocap.distill_files import check_latent_loaded
 from mocap.interfaces import Imitator, Simulator
 from mocap.motion.library import MotionLibrary
 
@@ -267,10 +268,12 @@ def build_evaluation_target(
         latent = plugins.get("latent", spec.latent.name).build(
             resolved.params.get("latent"), skeleton=skeleton, checkpoint=target.latent_checkpoint, device=device
         )
+        if target.latent_checkpoint is not None:
+            check_latent_loaded(latent, Path(target.latent_checkpoint), spec.latent.name)
         probe = make_sim(1)
         dt = float(probe.dt)
         probe.close()
-        own = latent.as_imitator(lib, dt=dt, device=device) if callable(getattr(latent, "as_imitator", None)) else None
+        own = latent.as_imitator(lib, dt=dt, device=device)
         if own is None:
             raise UserError(f"{target.latent_checkpoint}: the {spec.latent.name} latent has no imitator of its own and the spec names none")
         return LoadedTarget(target, skeleton, lib, own, latent, "pd_targets", own, make_sim)
@@ -282,6 +285,7 @@ def build_evaluation_target(
         latent = plugins.get("latent", spec.latent.name).build(
             resolved.params.get("latent"), skeleton=skeleton, checkpoint=target.latent_checkpoint, device=device
         )
+        check_latent_loaded(latent, Path(target.latent_checkpoint), spec.latent.name)
         label = str(load_latent_state(target.latent_checkpoint)["extra"].get("label", "policy_output"))
         policy = latent_imitator(PDTargetTeacher(imitator) if label == "pd_targets" else imitator, latent)
     return LoadedTarget(target, skeleton, lib, imitator, latent, label, policy, make_sim)

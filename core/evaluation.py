@@ -209,10 +209,10 @@ def record_video(
 ) -> Path | None:
     """Roll the imitator out on ``clip`` and save a video with the reference drawn as a ghost.
 
-    Returns None when the simulator cannot render (it has no ``make_recorder``).
+    Returns None when the simulator cannot render (:meth:`Simulator.make_recorder` gives None).
     """
     sim = make_sim(1)
-    recorder = sim.make_recorder(ghost=True) if hasattr(sim, "make_recorder") else None
+    recorder = sim.make_recorder(ghost=True)
     if recorder is None:
         sim.close()
         return None
@@ -264,7 +264,7 @@ class ImitationEval(Trainer):
             from mocap.latent_imitator import PDTargetTeacher, latent_imitator
 
             latent = ctx.stage_component("latent", checkpoint=latent_stage.checkpoint)
-            if getattr(latent, "decodes_pd_targets", False) and callable(getattr(latent, "as_imitator", None)):
+            if latent.decodes_pd_targets:
                 # a latent space with its own tracking policy (VMP): it imitates the reference itself
                 probe = make_sim(1)
                 dt = float(probe.dt)

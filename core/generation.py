@@ -185,8 +185,8 @@ def evaluate_generation(
     ``imitator.observe`` supplies the proprioception (its goal is dropped); ``to_pd_targets`` maps a
     decoder output to PD targets without a reference (see the module docstring).
     """
-    if not callable(getattr(latent, "random_action", None)):
-        raise ValueError(f"{type(latent).__name__} cannot generate: it has no random_action(obs, noise_scale, generator)")
+    if not latent.samples_prior:
+        raise ValueError(f"{type(latent).__name__} cannot generate: it has no prior to sample (LatentSpace.samples_prior)")
     p = params
     gen = torch.Generator().manual_seed(p.seed)
     sim = make_sim(p.num_rollouts)
@@ -205,13 +205,13 @@ def evaluate_generation(
     down = torch.zeros(p.num_rollouts, dtype=torch.bool)
     unstable = torch.zeros(p.num_rollouts, dtype=torch.bool)
     recorder = None
-    if video is not None and p.video_rollouts > 0 and hasattr(sim, "make_recorder"):
+    if video is not None and p.video_rollouts > 0:
         recorder = sim.make_recorder()
     rec_steps = min(steps, int(round(p.video_seconds / sim.dt)))
     frames_by_env: list[list[Any]] = [[] for _ in range(min(p.video_rollouts, p.num_rollouts))]
     from rich.progress import Progress
 
-    sixd = getattr(getattr(imitator, "observation", None), "sixd", "zhou")
+    sixd = imitator.proprio_sixd if imitator is not None else "zhou"
 
     def observe(state: Any, ref: Any) -> Observations:
         if imitator is None:  # a latent that decodes to PD targets on its own (VMP): plain proprioception
@@ -280,7 +280,7 @@ def evaluate_generation(
 
 def generate_from_target(loaded: Any, params: GenerationParams, *, video: Path | None = None, console: Any = None) -> dict[str, Any]:
     """:func:`evaluate_generation` of a built evaluation target (``mocap.evaluation.build_evaluation_target``)."""
-    own = bool(getattr(loaded.latent, "decodes_pd_targets", False))  # VMP: random_action gives PD targets
+    own = bool(loaded.latent.decodes_pd_targets)  # VMP: random_action gives PD targets
     imitator = None if own else loaded.imitator
     mapping = (lambda obs, out: out) if own else loaded.to_pd_targets
     return evaluate_generation(loaded.latent, imitator, mapping, loaded.library, loaded.make_sim, params, video=video, console=console)
@@ -308,9 +308,8 @@ class GenerationEval:
             ctx.stage_component("imitator", checkpoint=upstream.checkpoint if upstream else None) if ctx.spec.imitator is not None else None
         )
         latent = ctx.stage_component("latent", checkpoint=latent_stage.checkpoint)
-        if hasattr(latent, "eval"):
-            latent.eval()
-        if getattr(latent, "decodes_pd_targets", False):  # VMP: random_action already gives PD targets
+        latent.eval()
+        if latent.decodes_pd_targets:  # VMP: random_action already gives PD targets
             label = "pd_targets"
         else:
             label = load_latent_state(latent_stage.checkpoint)["extra"].get("label", "policy_output")

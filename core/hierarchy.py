@@ -17,30 +17,21 @@ trains a policy with PPO on a :class:`TaskEnv`:
 * **logged**: episode return, length and **normalized return** = return / (``task.max_reward`` ×
   ``episode_steps``) (PULSE Fig. 4), and the task's own metrics every iteration (``task.metrics()``).
 
-Tasks never see which latent space drives the humanoid; latent spaces never see the task. Optional
-task attributes used here: ``episode_steps``, ``max_reward``, ``sim_overrides`` (simulator params
-the task needs, e.g. the strike target), ``attach(sim)``, ``step(state)`` (after each reward),
-``state_dict()`` / ``load_state_dict()`` (goals, for exact resume), and for tasks that follow a
-reference motion (``vr_tracking``, ``hmd_tracking``, ``motion_tracking``):
-
-* ``motions=``: :func:`make_task_env` passes the env's :class:`~mocap.motion.library.MotionLibrary`
-  to a task factory that names a ``motions`` parameter or takes ``**kwargs`` (others are called as before);
-* ``reference_start(env_ids, clip_ids, times)``: called on every reset, before ``task.reset``, with
-  the (clip, time) each reset env was started from (reference-state initialization);
-* ``truncated(state)``: (N,) bool, the episode ends without failing (e.g. its clip ran out), OR-ed
-  with the time limit.
-
-Further optional task attributes (``terrain``, ``inbetween``, ``generation``):
-
-* ``attach_motions(library)``: called once with the env's motion library;
-* ``start_state(env_ids, frames) -> HumanoidState``: may replace the start frames drawn from the
-  library before the simulator is reset to them (terrain: moved onto the flat spawn square;
-  inbetween: moved back so that a whole keyframe sequence fits in the clip); ``frames`` is a
-  :class:`~mocap.state.MotionFrames` (``clip_ids``, ``times``); when it returns MotionFrames, their
-  ``clip_ids`` / ``times`` are what ``reference_start`` receives;
-* ``prior_rollout`` (bool) and ``prior_noise_scale``: the task action is ignored and every step
-  decodes ``latent.random_action(obs, prior_noise_scale, generator)`` (a rollout of the latent
-  space's prior, as :mod:`mocap.generation`); a latent space without a prior (``scratch``) is refused.
+Tasks never see which latent space drives the humanoid; latent spaces never see the task. What
+the env reads from a task beyond the four abstract methods is declared, with defaults, on
+:class:`mocap.interfaces.Task`: ``episode_steps``, ``max_reward``, ``sim_overrides`` (simulator
+params the task needs, e.g. the strike target), ``attach(sim)``, ``attach_motions(library)``,
+``start_state(env_ids, frames)`` (may replace the start frames: terrain's spawn square, inbetween's
+keyframe sequence; a :class:`~mocap.state.MotionFrames` result also names clip and time),
+``step(state)`` (after each reward), ``truncated(state)`` (OR-ed with the time limit),
+``state_dict()`` / ``load_state_dict()``, ``prior_rollout`` / ``prior_noise_scale`` (the task action
+is ignored and ``latent.random_action`` is rolled out; a latent without ``samples_prior`` is
+refused), and for tasks that follow a reference motion (``tracks_reference``: ``vr_tracking``,
+``hmd_tracking``, ``motion_tracking``) ``reference_start(env_ids, clip_ids, times)``, called on
+every reset before ``task.reset``. A task factory that names a ``motions`` parameter (or takes
+``**kwargs``) receives the env's :class:`~mocap.motion.library.MotionLibrary`. From the latent
+space the env uses :meth:`~mocap.interfaces.LatentSpace.decode_action`, ``reset_envs`` and
+``task_state_dict`` (declared there with defaults).
 
 ``scratch`` (registered here) is the no-latent baseline: a latent space whose task action is the
 PD target itself, ``q = offset + scale · a`` with ``a`` in [-1, 1] mapped to each joint's range
@@ -52,21 +43,20 @@ from __future__ import annotations
 import inspect
 from typing import Any, Callable
 
-import numpy as np
 import torch
 from pydantic import BaseModel, ConfigDict, Field
 from torch import Tensor
 
 from mocap.hooks import hookimpl
-from mocap.interfaces import Box, LatentSample, LatentSpace, Simulator, Task
+from mocap.interfaces import Box, LatentSample, LatentSpace, MultiDiscrete, Simulator, Task
 from mocap.motion.library import MotionLibrary, grid_start_times
 from mocap.observations import proprioception
 from mocap.rl.env import StepResult
+from mocap.sim_snapshot import load_sim_state, save_sim_state
 from mocap.skeleton import Skeleton
 from mocap.state import HumanoidState, MotionFrames, Observations, SimState
 
 STATE_FORMAT = "mocap.task_env/1"
-_HUMANOID_FIELDS = ("root_pos", "root_rot", "root_lin_vel", "root_ang_vel", "dof_pos", "dof_vel")
 
 
 # ---------------------------------------------------------------------------------- scratch
@@ -117,7 +107,7 @@ class TaskEnv:
     def __init__(
         self,
         task: Task,
-        latent: Any,
+        latent: LatentSpace,
         to_pd_targets: Callable[[Observations, Tensor], Tensor],
         library: MotionLibrary,
         sim: Simulator,
@@ -132,8 +122,8 @@ class TaskEnv:
         self.skeleton = sim.skeleton
         self.sixd = sixd
         self.start_min_height = float(start_min_height)
-        self.episode_steps = int(getattr(task, "episode_steps", 300))
-        self.max_reward = float(getattr(task, "max_reward", 1.0))
+        self.episode_steps = int(task.episode_steps)
+        self.max_reward = float(task.max_reward)
         self.action_space = latent.task_action_space
         self.proprio_dim = 15 * self.skeleton.num_bodies - 2
         self.obs_dim = self.proprio_dim + int(task.goal_dim)
@@ -141,29 +131,24 @@ class TaskEnv:
         self.steps = torch.zeros(self.num_envs, dtype=torch.long)
         self.ep_return = torch.zeros(self.num_envs)
         self._obs: Tensor | None = None
-        if hasattr(latent, "eval"):
-            latent.eval()
+        latent.eval()
         # the decoder's raw output (PULSE: decode_action; its `decoder` maps through an attached imitator)
-        self._decode = getattr(latent, "decode_action", None) or latent.decoder
+        self._decode = latent.decode_action
         #: the generation task: the task action is ignored, the latent prior is rolled out
-        self.prior_rollout = bool(getattr(task, "prior_rollout", False))
-        self.prior_noise_scale = float(getattr(task, "prior_noise_scale", 1.0))
+        self.prior_rollout = bool(task.prior_rollout)
+        self.prior_noise_scale = float(task.prior_noise_scale)
         self._prior_gen = torch.Generator().manual_seed(int(seed) + 1)
-        if self.prior_rollout and not callable(getattr(latent, "random_action", None)):
+        if self.prior_rollout and not latent.samples_prior:
             raise ValueError(
                 f"task {type(task).__name__} rolls out the latent space's prior, and {type(latent).__name__} has none "
                 "(no random_action): `scratch` is the no-latent baseline, there is no prior to sample; use a trained "
                 "latent space (pulse, hybrid_rvq)"
             )
-        attach = getattr(task, "attach", None)
-        if callable(attach):
-            attach(sim)
-        attach_motions = getattr(task, "attach_motions", None)
-        if callable(attach_motions):
-            attach_motions(library)
+        task.attach(sim)
+        task.attach_motions(library)
         # a task that follows the clip it started from reads the reference every step: start it on
         # the control grid and read the reference from the precomputed table (MotionLibrary.use_control_grid)
-        self._tracks_reference = callable(getattr(task, "reference_start", None))
+        self._tracks_reference = bool(task.tracks_reference)
         if self._tracks_reference:
             library.use_control_grid(float(sim.dt), self.episode_steps + 2)
 
@@ -183,20 +168,15 @@ class TaskEnv:
             dur = lib.durations.to(times.device, torch.float64)[clip_ids]
             times = grid_start_times(times.to(torch.float64), dur, lib.loops[clip_ids], float(self.sim.dt))
         frames: HumanoidState = self.library.frames(clip_ids, times)
-        start_state = getattr(self.task, "start_state", None)
-        if callable(start_state):  # terrain spawn square, keyframe-sequence start
-            frames = start_state(ids, frames)
-            if isinstance(frames, MotionFrames):
-                clip_ids, times = frames.clip_ids, frames.times
+        frames = self.task.start_state(ids, frames)  # terrain spawn square, keyframe-sequence start
+        if isinstance(frames, MotionFrames):
+            clip_ids, times = frames.clip_ids, frames.times
         self.sim.reset(ids, frames)
-        reset_latent = getattr(self.latent, "reset_envs", None)
-        if callable(reset_latent):  # latents with per-env state (VMP: the tracker's action history)
-            reset_latent(ids)
+        self.latent.reset_envs(ids)  # latents with per-env state (VMP: the tracker's action history)
         self.steps[ids] = 0
         self.ep_return[ids] = 0.0
-        reference_start = getattr(self.task, "reference_start", None)
-        if callable(reference_start):  # tasks that track the reference they were started from
-            reference_start(ids, clip_ids, times)
+        if self._tracks_reference:  # tasks that track the reference they were started from
+            self.task.reference_start(ids, clip_ids, times)
         self.task.reset(ids, self.sim.state)
 
     # ---------------------------------------------------------------------------------- VecEnv
@@ -221,17 +201,15 @@ class TaskEnv:
         targets = self.pd_targets(state, actions)
         state = self.sim.step(targets)
         reward = self.task.reward(state, actions).float().cpu()
-        step_hook = getattr(self.task, "step", None)
-        if callable(step_hook):
-            step_hook(state)
+        self.task.step(state)
         self.steps += 1
         self.ep_return += reward
         unstable = state.unstable.cpu() if state.unstable.numel() else torch.zeros(self.num_envs, dtype=torch.bool)
         terminated = self.task.terminated(state).cpu().bool() | unstable
         truncated = self.steps >= self.episode_steps
-        task_truncated = getattr(self.task, "truncated", None)
-        if callable(task_truncated):  # e.g. the tracked clip ran out
-            truncated = truncated | task_truncated(state).cpu().bool()
+        task_truncated = self.task.truncated(state)
+        if task_truncated is not None:  # e.g. the tracked clip ran out
+            truncated = truncated | task_truncated.cpu().bool()
         truncated = truncated & ~terminated
         final_obs = self._observe(state)
         done = terminated | truncated
@@ -265,17 +243,9 @@ class TaskEnv:
             "ep_return": self.ep_return.clone(),
             "prior_generator": self._prior_gen.get_state().clone(),
         }
-        if hasattr(self.sim, "get_physics_state"):
-            sd["physics"] = torch.from_numpy(np.array(self.sim.get_physics_state(), dtype=np.float64, copy=True))
-        else:
-            s = self.sim.state
-            sd["sim_state"] = {k: getattr(s, k).cpu().clone() for k in _HUMANOID_FIELDS}
-        task_sd = getattr(self.task, "state_dict", None)
-        if callable(task_sd):
-            sd["task"] = task_sd()
-        latent_sd = getattr(self.latent, "task_state_dict", None)
-        if callable(latent_sd):
-            sd["latent"] = latent_sd()
+        sd.update(save_sim_state(self.sim))
+        sd["task"] = self.task.state_dict()
+        sd["latent"] = self.latent.task_state_dict()
         return sd
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
@@ -288,16 +258,10 @@ class TaskEnv:
         self.ep_return = state["ep_return"].clone()
         if "prior_generator" in state:
             self._prior_gen.set_state(state["prior_generator"].clone())
-        ids = torch.arange(self.num_envs)
-        if "physics" in state and hasattr(self.sim, "set_physics_state"):
-            phys = state["physics"]
-            phys = phys.detach().cpu().numpy() if isinstance(phys, Tensor) else np.asarray(phys)
-            self.sim.set_physics_state(ids, np.array(phys, dtype=np.float64, copy=True))
-        else:
-            self.sim.reset(ids, HumanoidState(**{k: v for k, v in state["sim_state"].items()}))
-        if "task" in state and callable(getattr(self.task, "load_state_dict", None)):
+        load_sim_state(self.sim, torch.arange(self.num_envs), state)
+        if "task" in state:
             self.task.load_state_dict(state["task"])
-        if "latent" in state and callable(getattr(self.latent, "load_task_state_dict", None)):
+        if "latent" in state:
             self.latent.load_task_state_dict(state["latent"])
         self._obs = self._observe(self.sim.state)
 
@@ -336,7 +300,7 @@ def make_task_env(ctx: Any, num_envs: int) -> TaskEnv:
         raise StageFailed("the latent stage has no checkpoint")
     latent = ctx.stage_component("latent", checkpoint=latent_ckpt)
     label = "pd_targets"
-    if latent_ckpt is not None and not getattr(latent, "decodes_pd_targets", False):
+    if latent_ckpt is not None and not latent.decodes_pd_targets:
         from mocap.distill import load_latent_state
 
         label = str(load_latent_state(latent_ckpt)["extra"].get("label", "policy_output"))
@@ -348,7 +312,7 @@ def make_task_env(ctx: Any, num_envs: int) -> TaskEnv:
         mapping = imitator.to_pd_targets
     sim_ref = spec.simulator
     sim_params = ctx.params("simulator")
-    overrides = getattr(task, "sim_overrides", None) or {}
+    overrides = dict(task.sim_overrides)
     if overrides:
         sim_params = type(sim_params).model_validate({**sim_params.model_dump(), **overrides})
     sim = ctx.plugins.get("simulator", sim_ref.name).build(sim_params, skeleton=skeleton, num_envs=num_envs, seed=ctx.seed)
@@ -359,7 +323,7 @@ def make_task_env(ctx: Any, num_envs: int) -> TaskEnv:
         raise StageFailed(f"task {task_ref.name} with latent {spec.latent.name}: {exc}") from None
     space = env.action_space
     probe = (
-        torch.zeros(num_envs, len(space.nvec), dtype=torch.long) if hasattr(space, "nvec") else torch.zeros(num_envs, *space.shape)
+        torch.zeros(num_envs, len(space.nvec), dtype=torch.long) if isinstance(space, MultiDiscrete) else torch.zeros(num_envs, *space.shape)
     )
     try:  # a decoder that needs the reference motion fails here, before training starts
         env.pd_targets(sim.state, probe)

@@ -22,8 +22,10 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, ClassVar, Protocol, Sequence
+from types import MappingProxyType
+from typing import TYPE_CHECKING, Any, Callable, ClassVar, Mapping, Protocol, Sequence, runtime_checkable
 
+import numpy as np
 import torch
 from torch import Tensor
 
@@ -97,6 +99,35 @@ class Simulator(ABC):
     def close(self) -> None:  # noqa: B027 - optional hook
         """Release native resources."""
 
+    # ------------------------------------------------------------- optional capabilities
+    # What envs, tasks and commands use when a simulator offers it; each default says "not offered".
+    @property
+    def ground_contact(self) -> Tensor | None:
+        """(N, B) bool contacts with the ground only (not props), or None: callers then use
+        ``SimState.body_contact`` (fall detection that a struck prop must not trigger)."""
+        return None
+
+    def height_at(self, xy: Tensor) -> Tensor:
+        """Ground height (...) at world ``xy`` (..., 2), m. Default: the plane z = 0."""
+        return torch.zeros(xy.shape[:-1], dtype=xy.dtype, device=xy.device)
+
+    def get_physics_state(self) -> np.ndarray | None:
+        """(N, S) float64 copy of every env's full physics state, for bit-exact save and resume; None
+        when the simulator has none (envs then save the :class:`SimState` fields and restore them
+        with :meth:`reset`)."""
+        return None
+
+    def set_physics_state(self, env_ids: Tensor, states: np.ndarray, *, as_reset: bool = True) -> None:
+        """Write states from :meth:`get_physics_state` into envs ``env_ids`` (only called when
+        :meth:`get_physics_state` returned one)."""
+        raise NotImplementedError(f"{type(self).__name__} has no physics state to set")
+
+    def make_recorder(self, *, ghost: bool = False, **options: Any) -> Any | None:
+        """A video recorder of env 0 (``add_frame(sim, ...)``, ``save(path)``; the MuJoCo simulator's is
+        ``mocap_sim_mujoco.render``), with a reference ghost when ``ghost``; None when the simulator
+        cannot render."""
+        return None
+
 
 # ------------------------------------------------------------------------------------ imitator
 class Imitator(ABC):
@@ -123,6 +154,16 @@ class Imitator(ABC):
     @abstractmethod
     def observe(self, state: SimState, reference: MotionFrames) -> Observations:
         """Build the imitator's observation from the simulated state and the next reference frames."""
+
+    #: the trained policy network (a :class:`mocap.rl.networks.ActorCritic`) when the imitator has
+    #: one: students distilled from it may copy its input statistics (``policy.obs_norm``)
+    policy: Any = None
+
+    @property
+    def proprio_sixd(self) -> str:
+        """The 6D-rotation layout of the imitator's proprioception (:func:`mocap.observations.proprioception`),
+        which a latent space driving it must use too. Default ``"zhou"``."""
+        return "zhou"
 
 
 # -------------------------------------------------------------------------------- latent space
@@ -171,7 +212,67 @@ class LatentSpace(torch.nn.Module, ABC):
     def to_latent(self, obs: Observations, task_action: Tensor) -> Tensor:
         """Map a task action (residual, absolute latent or code indices) to z (N, Z)."""
 
+    @property
+    def config(self) -> dict[str, Any] | None:
+        """The architecture as plain values, saved next to the weights in ``latent.pt`` and compared
+        with the spec when a checkpoint is loaded (a property: a method would be pickled). Default None."""
+        return None
 
+    # ------------------------------------------------ optional: what tasks, generation and eval use
+    #: the latent space has a prior that :meth:`random_action` samples (random generation, the
+    #: ``generation`` task, ``mocap generate``); False for the no-latent ``scratch`` baseline
+    samples_prior: ClassVar[bool] = False
+
+    @property
+    def decodes_pd_targets(self) -> bool:
+        """True when :meth:`decode_action` and :meth:`random_action` give PD targets themselves (VMP's
+        tracker); False: they give the teacher's raw policy output, mapped by the imitator."""
+        return False
+
+    def decode_action(self, obs: Observations, z: Tensor) -> Tensor:
+        """The raw action for ``z`` (N, Z): what a task env steps with after the imitator's mapping
+        (PULSE: the teacher's raw output). Default: :meth:`decoder`."""
+        return self.decoder(obs, z)
+
+    def random_action(self, obs: Observations, noise_scale: float = 1.0, generator: torch.Generator | None = None) -> Tensor:
+        """One step of unconditional generation: a prior sample decoded like :meth:`decode_action`
+        (only when :attr:`samples_prior`)."""
+        raise NotImplementedError(f"{type(self).__name__} has no prior to sample")
+
+    def as_imitator(self, library: Any, dt: float | None = None, device: Any = "cpu") -> Imitator | None:
+        """The latent space's own tracking policy as an :class:`Imitator` over ``library`` (VMP's
+        stage 2: ``mocap eval`` then evaluates it without a teacher), or None (default)."""
+        return None
+
+    def attach_imitator(self, imitator: Imitator) -> "LatentSpace":
+        """Use ``imitator`` (the teacher) to map decoder outputs to PD targets; returns ``self``."""
+        return self
+
+    def reset_envs(self, env_ids: Tensor) -> None:  # noqa: B027 - optional hook
+        """Envs ``env_ids`` of a task env were reset (latents with per-env state: VMP's action history)."""
+
+    # optional hooks of the shared ``distill`` trainer (a student also implements DistillableLatent)
+    def init_from_teacher(self, teacher: Imitator) -> None:  # noqa: B027 - optional hook
+        """Called once before distillation starts (e.g. copy the teacher policy's input statistics);
+        a ValueError is reported as a spec mismatch."""
+
+    def update_normalizers(self, obs: Observations) -> None:  # noqa: B027 - optional hook
+        """Fold a rollout chunk's observations (fields (T, N, ...)) into the student's running
+        statistics, before each update (data-parallel: merged over ranks)."""
+
+    def rl_hook(self) -> Any | None:
+        """An on-policy RL term added to distillation (PULSE's Table 3 ablation), or None."""
+        return None
+
+    def task_state_dict(self) -> dict[str, Any]:
+        """Per-env state kept while driving a task env (for bit-exact resume)."""
+        return {}
+
+    def load_task_state_dict(self, state: dict[str, Any]) -> None:  # noqa: B027 - optional hook
+        """Restore :meth:`task_state_dict`."""
+
+
+@runtime_checkable
 class DistillableLatent(Protocol):
     """What the shared ``distill`` trainer needs from a latent space (PULSE, Hybrid-RVQ, ...).
 
@@ -191,6 +292,19 @@ class DistillableLatent(Protocol):
         (temporal terms must not cross it); ``progress`` in [0, 1] drives schedules (e.g. the KL
         weight). Returns named scalars including ``"loss"``, the total to minimize.
         """
+        ...
+
+
+@runtime_checkable
+class RLTrainable(Protocol):
+    """A stage component that PPO (or another RL trainer) can train: it builds its own RL problem.
+
+    The PHC imitator and VMP's tracker implement it; a trainer gets the env through
+    ``ctx.make_rl_env(num_envs)`` (:class:`mocap.pipeline.StageContext`), which calls this.
+    """
+
+    def make_env(self, ctx: Any, num_envs: int) -> Any:
+        """A :class:`mocap.rl.env.VecEnv` of ``num_envs`` envs for the stage ``ctx``."""
         ...
 
 
@@ -219,6 +333,55 @@ class Task(ABC):
     def metrics(self) -> dict[str, float]:
         """Task metrics accumulated since the last call (documented per task)."""
         return {}
+
+    # ------------------------------------------------ optional: what the task env reads and calls
+    #: control steps before a time-limit truncation
+    episode_steps: int = 300
+    #: the largest per-step reward (``normalized_return = return / (max_reward × episode_steps)``)
+    max_reward: float = 1.0
+    #: the generation task: the task action is ignored and the latent prior is rolled out
+    #: (``LatentSpace.random_action`` with ``prior_noise_scale``)
+    prior_rollout: bool = False
+    prior_noise_scale: float = 1.0
+    #: the task follows the clip it started from: the env calls :meth:`reference_start` and starts
+    #: episodes on the control grid (reference read from the precomputed table)
+    tracks_reference: bool = False
+    #: simulator options the task needs (a target prop, a terrain), merged into the simulator's params
+    sim_overrides: Mapping[str, Any] = MappingProxyType({})
+
+    def attach(self, sim: "Simulator") -> None:  # noqa: B027 - optional hook
+        """Called once with the simulator the task runs in (props, ground contacts, terrain)."""
+
+    def attach_motions(self, library: Any) -> None:  # noqa: B027 - optional hook
+        """Called once with the motion library (a :class:`mocap.motion.library.MotionLibrary`)."""
+
+    def start_state(self, env_ids: Tensor, frames: HumanoidState) -> HumanoidState:
+        """The start states of envs ``env_ids`` given the sampled reference ``frames`` (terrain spawn,
+        keyframe sequences); a :class:`MotionFrames` result also says which clip and time were
+        chosen. Default: the frames as sampled."""
+        return frames
+
+    def reference_start(self, env_ids: Tensor, clip_ids: Tensor, times: Tensor) -> None:  # noqa: B027
+        """Envs ``env_ids`` start at ``times`` (s) of clips ``clip_ids`` (tasks with ``tracks_reference``)."""
+
+    def step(self, state: SimState) -> None:  # noqa: B027 - optional hook
+        """Called after every simulator step, after :meth:`reward` (advance per-env task state)."""
+
+    def truncated(self, state: SimState) -> Tensor | None:
+        """(N,) bool: episodes the task ends without failure (a tracked clip ran out); None: none."""
+        return None
+
+    def state_dict(self) -> dict[str, Any]:
+        """Per-env task state for bit-exact resume (tensors, plain values)."""
+        return {}
+
+    def markers(self, env_id: int = 0) -> list[tuple[Any, tuple[float, ...], float]] | None:
+        """Goal markers of env ``env_id`` drawn in task videos: ``[(position (3,), rgba, radius)]``,
+        or None (default: none)."""
+        return None
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:  # noqa: B027 - optional hook
+        """Restore :meth:`state_dict`."""
 
 
 # --------------------------------------------------------------------------------- motion data
@@ -294,6 +457,7 @@ __all__: Sequence[str] = (
     "Metric",
     "MotionSource",
     "MultiDiscrete",
+    "RLTrainable",
     "Simulator",
     "StageResult",
     "Task",

@@ -24,7 +24,7 @@ from typing import Any
 import torch
 from torch import Tensor
 
-from mocap.interfaces import Imitator, LatentSpace
+from mocap.interfaces import DistillableLatent, Imitator, LatentSpace
 from mocap.state import MotionFrames, Observations, SimState
 
 
@@ -57,10 +57,8 @@ class LatentImitator(Imitator):
             first = next(iter(latent.parameters()), None)
             device = first.device if first is not None else "cpu"
         self.device = torch.device(device)
-        self.distillable = hasattr(latent, "student_action")
-        attach = getattr(latent, "attach_imitator", None)
-        if callable(attach):
-            attach(imitator)
+        self.distillable = isinstance(latent, DistillableLatent)
+        latent.attach_imitator(imitator)
 
     def observe(self, state: SimState, reference: MotionFrames) -> Observations:
         return self.imitator.observe(state, reference)
@@ -70,7 +68,8 @@ class LatentImitator(Imitator):
         x = observations_to(obs, self.device)
         with torch.no_grad():
             if self.distillable:
-                out = self.latent.student_action(x, sample=not deterministic)  # type: ignore[attr-defined]
+                assert isinstance(self.latent, DistillableLatent)
+                out = self.latent.student_action(x, sample=not deterministic)
             else:
                 enc = self.latent.encoder(x)
                 z = enc.mean if deterministic or enc.std is None else enc.mean + enc.std * torch.randn_like(enc.mean)
@@ -95,9 +94,9 @@ class PDTargetTeacher(Imitator):
         self.imitator = imitator
 
     @property
-    def policy(self) -> Any:
+    def policy(self) -> Any:  # type: ignore[override]
         """The wrapped imitator's policy network (students may copy its input statistics)."""
-        return getattr(self.imitator, "policy", None)
+        return self.imitator.policy
 
     def observe(self, state: Any, reference: Any) -> Any:
         return self.imitator.observe(state, reference)
@@ -112,10 +111,9 @@ class PDTargetTeacher(Imitator):
         return output
 
 
-def latent_imitator(imitator: Any, latent: Any, device: torch.device | str | None = None) -> LatentImitator:
+def latent_imitator(imitator: Imitator, latent: LatentSpace, device: torch.device | str | None = None) -> LatentImitator:
     """Convenience: ``LatentImitator(imitator, latent, device)`` with the latent in eval mode."""
-    if hasattr(latent, "eval"):
-        latent.eval()
+    latent.eval()
     return LatentImitator(imitator, latent, device)
 
 

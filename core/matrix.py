@@ -47,7 +47,7 @@ from pathlib import Path
 from typing import Any
 
 from mocap.metric_display import format_cell, mean_ci95, metric_label
-from mocap.spec import SpecError, SpecIssue, _rebase_paths, apply_overrides, load_document, validate_document
+from mocap.spec import SpecError, SpecIssue, _rebase_paths, apply_overrides, extends_hints, load_document, validate_document
 
 
 @dataclass
@@ -123,13 +123,17 @@ def expand(doc: dict[str, Any], base_dir: Path, source: str = "<spec>") -> list[
 
 def load_cells(path: Path, plugins: Any, overrides: list[str] | None = None) -> list[tuple[Cell, Any]]:
     """Expand and validate every cell of a spec file: ``[(cell, ResolvedSpec)]``."""
-    doc = load_document(Path(path))
+    replaced: list[tuple[str, Any, Any]] = []
+    doc = load_document(Path(path), replaced=replaced)
     if overrides:
         doc = apply_overrides(doc, overrides)
     out = []
     for cell in expand(doc, Path(path).resolve().parent, str(path)):
         source = f"{path} (cell {cell.name})" if cell.name else str(path)
-        out.append((cell, validate_document(cell.doc, plugins, source=source, base_dir=Path(path).resolve().parent)))
+        try:
+            out.append((cell, validate_document(cell.doc, plugins, source=source, base_dir=Path(path).resolve().parent)))
+        except SpecError as exc:
+            raise extends_hints(exc, replaced) from None
     return out
 
 

@@ -49,6 +49,7 @@ import typer
 from pydantic import BaseModel, ConfigDict, Field
 
 from mocap.hooks import hookimpl
+from mocap.interfaces import Imitator
 from mocap.rotations import quat_from_rotvec, quat_mul, quat_normalize
 
 PROTOCOL = "mocap-noisy-reference-v1"
@@ -179,7 +180,7 @@ def evaluate_noisy(
     for i, level in enumerate(levels):
         index = DEFAULT_LEVELS.index(level) if level in DEFAULT_LEVELS else len(DEFAULT_LEVELS) + i
         observed = None if level.clean and smooth == 1 else noisy_library(library, level, seed + index, smooth)
-        actor = policy if hasattr(policy, "act") else policy(observed if observed is not None else library)
+        actor = policy if isinstance(policy, Imitator) else policy(observed if observed is not None else library)
         table = evaluate_imitator(actor, library, make_sim, params, default_metrics(), console, observed=observed)
         rows.append(
             {
@@ -287,7 +288,7 @@ def register_commands(app: Any) -> None:
         info = load_evaluation_target(target, plugins)
         loaded = build_evaluation_target(info, plugins, use_latent=not imitator_only)
         policy: Any = loaded.policy
-        if info.spec.imitator is None and callable(getattr(loaded.latent, "as_imitator", None)):
+        if info.spec.imitator is None and loaded.latent is not None:
             probe = loaded.make_sim(1)
             dt = float(probe.dt)
             probe.close()

@@ -38,7 +38,7 @@ from rich.console import Console
 
 from mocap import distributed as dist
 from mocap.checkpoint import atomic_write_json, atomic_write_text, hardware, package_versions
-from mocap.interfaces import MotionSource, StageResult
+from mocap.interfaces import MotionSource, RLTrainable, StageResult
 from mocap.fingerprint import file_digest, files_fingerprint
 from mocap.motion.clip import MotionDataError
 from mocap.plugins import PluginError, PluginSet, UnknownComponent
@@ -198,7 +198,13 @@ class StageContext:
         Stage components share one factory signature: ``factory(params, *, skeleton, checkpoint,
         device)``; ``checkpoint`` is None when the component is about to be trained.
         """
-        return self.build(stage or self.stage, skeleton=self.skeleton, checkpoint=checkpoint, device=self.device)
+        stage = stage or self.stage
+        component = self.build(stage, skeleton=self.skeleton, checkpoint=checkpoint, device=self.device)
+        if stage == "latent" and checkpoint is not None:
+            from mocap.distill_files import check_latent_loaded
+
+            check_latent_loaded(component, Path(checkpoint), self.spec.latent.name)
+        return component
 
     def make_rl_env(self, num_envs: int) -> Any:
         """The RL problem of this stage: ``stage_component().make_env(self, num_envs)`` (a VecEnv);
@@ -211,10 +217,10 @@ class StageContext:
             component = self.stage_component()
         except TypeError:  # a task factory (params, *, skeleton, num_envs, device): it runs through a latent space
             component = None
-        if self.stage == "task" and not hasattr(component, "make_env"):
+        if self.stage == "task" and not isinstance(component, RLTrainable):
             raise StageFailed("the task stage needs a latent space (use `latent: {name: scratch}` for a policy without one)")
-        if not hasattr(component, "make_env"):
-            raise StageFailed(f"{self.stage} {getattr(self.spec, self.stage).name!r} cannot be trained by RL (no make_env)")
+        if not isinstance(component, RLTrainable):
+            raise StageFailed(f"{self.stage} {getattr(self.spec, self.stage).name!r} cannot be trained by RL (it is not RLTrainable: no make_env)")
         return component.make_env(self, num_envs)
 
     def spec_yaml(self) -> str:

@@ -40,10 +40,20 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any, Callable, Optional
+from typing import Annotated, Any, Callable, Optional, Protocol, runtime_checkable
 
 import torch
 import typer
+
+
+@runtime_checkable
+class MujocoBacked(Protocol):
+    """A simulator the interactive viewer can show: a MuJoCo model and each env's state written
+    into an ``MjData`` (the ``mujoco`` simulator; ``mujoco_warp`` too)."""
+
+    model: Any
+
+    def write_mjdata(self, env_id: int, data: Any) -> Any: ...
 
 
 #: slow-motion factors selectable with [ and ]
@@ -139,7 +149,7 @@ class Player:
         self.noise, self.horizon, self.max_steps = float(noise), float(horizon), int(max_steps_per_advance)
         self.generator = torch.Generator().manual_seed(int(seed))
         latent = loaded.latent
-        can_generate = latent is not None and callable(getattr(latent, "random_action", None))
+        can_generate = latent is not None and latent.samples_prior
         self.controls = PlayControls(self.lib.num_clips, can_generate=can_generate)
         if clip is not None:
             self.controls.clip = self._clip_index(clip)
@@ -408,7 +418,7 @@ def play(
     plugins = get_plugins()
     loaded = build_evaluation_target(load_evaluation_target(target, plugins), plugins, motions=motions, use_latent=not imitator_only)
     sim = loaded.make_sim(1)
-    if not callable(getattr(sim, "write_mjdata", None)) or getattr(sim, "model", None) is None:
+    if not isinstance(sim, MujocoBacked):
         raise UserError(f"the {type(sim).__name__} simulator has no MuJoCo model to show; {_render_hint(target, clip)}")
     player = Player(loaded, sim, clip=clip, generate=generate, noise=noise, seed=seed, horizon=horizon)
     player.controls.speed_index = min(range(len(SPEEDS)), key=lambda i: abs(math.log(SPEEDS[i] / max(speed, 1e-6))))
@@ -474,15 +484,14 @@ def render_policy(
 
     def make_sim(n: int) -> Any:  # the simulator, its recorder sized to width x height
         sim = loaded.make_sim(n)
-        base = getattr(sim, "make_recorder", None)
-        if callable(base):
-            sim.make_recorder = lambda **options: base(**{"width": width, "height": height, **options})
+        base = sim.make_recorder
+        sim.make_recorder = lambda **options: base(**{"width": width, "height": height, **options})  # type: ignore[method-assign]
         return sim
 
     if generate:
         sim = make_sim(1)
         player = Player(loaded, sim, clip=clip, generate=True, noise=noise, seed=seed, horizon=seconds or 10.0)
-        recorder = sim.make_recorder() if hasattr(sim, "make_recorder") else None
+        recorder = sim.make_recorder()
         if recorder is None:
             raise UserError(f"the {type(sim).__name__} simulator cannot render videos")
         steps = max(1, int(round(player.horizon / player.dt)))

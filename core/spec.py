@@ -236,24 +236,48 @@ def _yaml_load(text: str, source: str) -> Any:
         raise SpecError(source, [SpecIssue("", f"YAML error: {exc}")]) from None
 
 
-def deep_merge(base: Any, override: Any, _root: bool = True) -> Any:
+def deep_merge(base: Any, override: Any, _root: bool = True, replaced: list[tuple[str, Any, Any]] | None = None, _path: str = "") -> Any:
     """``override`` on top of ``base``: mappings merge recursively, everything else replaces.
 
-    A component mapping whose ``name`` changes is replaced whole (the old params belong to
-    another component).
+    A component mapping whose ``name`` changes is replaced whole (the old params, and a stage's
+    trainer, belong to another component); ``replaced`` collects ``(path, old name, new name)`` of
+    each such mapping, for the hint :func:`extends_hints` adds to a later validation error.
     """
     if not (isinstance(base, dict) and isinstance(override, dict)):
         return copy.deepcopy(override)
     if not _root and "name" in base and "name" in override and base["name"] != override["name"]:
+        if replaced is not None:
+            replaced.append((_path, base["name"], override["name"]))
         return copy.deepcopy(override)
     out = copy.deepcopy(base)
     for key, value in override.items():
-        out[key] = deep_merge(out[key], value, _root=False) if key in out else copy.deepcopy(value)
+        sub = f"{_path}.{key}" if _path else str(key)
+        out[key] = deep_merge(out[key], value, _root=False, replaced=replaced, _path=sub) if key in out else copy.deepcopy(value)
     return out
 
 
-def load_document(path: Path, _chain: tuple[Path, ...] = ()) -> dict[str, Any]:
-    """Read a spec file and everything it ``extends`` into one merged mapping (not yet validated)."""
+def extends_hints(exc: SpecError, replaced: list[tuple[str, Any, Any]]) -> SpecError:
+    """``exc`` with a hint on each issue inside a section that ``extends:`` replaced whole because
+    its component was renamed (the usual cause of "task.trainer.name: Field required")."""
+    if not replaced:
+        return exc
+    issues = []
+    for issue in exc.issues:
+        for path, old, new in replaced:
+            if issue.path == path or issue.path.startswith(path + "."):
+                hint = (
+                    f" (under `extends:`, {path} was renamed from {old!r} to {new!r}, so nothing of the parent's {path} "
+                    "section is kept: its params and trainer belong to the other component; write the section in full)"
+                )
+                issue = SpecIssue(issue.path, issue.message + hint, issue.line, issue.column)
+                break
+        issues.append(issue)
+    return SpecError(exc.source, issues)
+
+
+def load_document(path: Path, _chain: tuple[Path, ...] = (), replaced: list[tuple[str, Any, Any]] | None = None) -> dict[str, Any]:
+    """Read a spec file and everything it ``extends`` into one merged mapping (not yet validated);
+    ``replaced``: see :func:`deep_merge`."""
     path = Path(path)
     source = str(path)
     if not path.is_file():
@@ -272,8 +296,8 @@ def load_document(path: Path, _chain: tuple[Path, ...] = ()) -> dict[str, Any]:
         return _rebase_paths(doc, path.parent)
     if not isinstance(parent, str) or not parent:
         raise SpecError(source, [SpecIssue("extends", f"must be a relative path to another spec file (got {_fmt_value(parent)})")])
-    base = load_document(path.parent / parent, (*_chain, resolved))
-    return deep_merge(base, _rebase_paths(doc, path.parent))
+    base = load_document(path.parent / parent, (*_chain, resolved), replaced)
+    return deep_merge(base, _rebase_paths(doc, path.parent), replaced=replaced)
 
 
 def parse_document(text: str, source: str = "<spec>") -> dict[str, Any]:
@@ -458,10 +482,14 @@ def validate_document(
 
 def load_spec(path: str | Path, plugins: PluginSet, overrides: list[str] | None = None) -> ResolvedSpec:
     """Read, merge (``extends``), override (``--set``) and validate a spec file."""
-    doc = load_document(Path(path))
+    replaced: list[tuple[str, Any, Any]] = []
+    doc = load_document(Path(path), replaced=replaced)
     if overrides:
         doc = apply_overrides(doc, overrides)
-    return validate_document(doc, plugins, source=str(path), base_dir=Path(path).resolve().parent)
+    try:
+        return validate_document(doc, plugins, source=str(path), base_dir=Path(path).resolve().parent)
+    except SpecError as exc:
+        raise extends_hints(exc, replaced) from None
 
 
 def load_spec_text(text: str, plugins: PluginSet, source: str = "<spec>", overrides: list[str] | None = None) -> ResolvedSpec:

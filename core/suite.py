@@ -39,7 +39,7 @@ def has_prior(ctx: Any) -> bool:
     if stage is None or stage.checkpoint is None:
         return False
     latent = ctx.stage_component("latent", checkpoint=stage.checkpoint)
-    return callable(getattr(latent, "random_action", None))
+    return bool(latent.samples_prior)
 
 
 class EvalSuite(Trainer):

@@ -78,12 +78,11 @@ def render_task(
     try:
         policy = load_policy(policy_path)
         policy.eval()
-        recorder = env.sim.make_recorder(width=width, height=height) if hasattr(env.sim, "make_recorder") else None
+        recorder = env.sim.make_recorder(width=width, height=height)
         if recorder is None:
             raise UserError(f"the {type(env.sim).__name__} simulator cannot render videos")
         space = env.action_space
         bounded = isinstance(space, Box) and (space.low != float("-inf") or space.high != float("inf"))
-        markers = getattr(env.task, "markers", None)
         obs = env.reset()
         steps = max(1, int(round(seconds / float(env.sim.dt))))
         episodes = falls = 0
@@ -94,7 +93,7 @@ def render_task(
                 action = action.clamp(space.low, space.high)
             result = env.step(action)
             obs = result.obs
-            recorder.add_frame(env.sim.state, markers=markers(0) if callable(markers) else None)
+            recorder.add_frame(env.sim.state, markers=env.task.markers(0))
             if bool(result.terminated[0] | result.truncated[0]):
                 episodes += 1
                 falls += int(result.terminated[0])

@@ -122,6 +122,31 @@ def test_task_env_resume_is_exact(amp, walk):  # noqa: F811
     a.close(), b.close()
 
 
+def test_task_env_resumes_on_a_simulator_without_a_physics_state(amp, walk):  # noqa: F811
+    """A simulator whose ``get_physics_state`` gives None (the interface default) is saved as its
+    HumanoidState fields and restored with ``reset`` (the task env used to save only 6 of the 10
+    fields and could not rebuild the state)."""
+    from mocap_sim_mujoco.simulator import MujocoSimulator
+
+    class Kinematic(MujocoSimulator):
+        def get_physics_state(self):
+            return None
+
+    latent = ScratchLatent(ScratchParams(), amp)
+    envs = [TaskEnv(Upright(UprightParams(), 3), latent, lambda obs, out: out, MotionLibrary(walk, amp), Kinematic(skeleton=amp, num_envs=3, seed=0), seed=1)
+            for _ in range(2)]
+    a, b = envs
+    a.reset()
+    for _ in range(5):
+        a.step(torch.zeros(3, amp.num_dofs))
+    sd = a.state_dict()
+    assert "physics" not in sd and set(sd["sim_state"]) >= {"root_pos", "body_pos", "body_ang_vel"}
+    b.reset()
+    b.load_state_dict(sd)
+    assert torch.allclose(b.sim.state.root_pos, a.sim.state.root_pos, atol=1e-6)
+    a.close(), b.close()
+
+
 def test_a_reference_dependent_decoder_is_refused(amp, walk, teacher_file):  # noqa: F811
     from mocap_phc.imitator import PHCParams, make_phc
 

@@ -93,6 +93,20 @@ def test_extends_merges_and_replaces_renamed_components(tmp_path: Path):
     assert spec.simulator.params["hidden"] == 4  # inherited
 
 
+def test_a_renamed_component_under_extends_explains_the_missing_trainer(tmp_path: Path):
+    """Renaming a stage's component in a child spec drops the parent's whole section; the error on
+    the half-written trainer says so (it used to be a bare "Field required")."""
+    (tmp_path / "base.yaml").write_text(TOY_SPEC)
+    (tmp_path / "child.yaml").write_text("extends: base.yaml\nlatent: {name: toy_latent_b, trainer: {params: {iterations: 5}}}\n")
+    with pytest.raises(SpecError) as info:
+        load_spec(tmp_path / "child.yaml", PSET)
+    msg = str(info.value)
+    assert "latent.trainer.name" in msg
+    assert "latent was renamed from 'toy_latent' to 'toy_latent_b'" in msg and "write the section in full" in msg
+    (tmp_path / "ok.yaml").write_text("extends: base.yaml\nlatent: {params: {}, trainer: {params: {iterations: 5}}}\n")
+    load_spec(tmp_path / "ok.yaml", PSET)  # no rename: the trainer merges as before
+
+
 def test_extends_cycle_and_missing_base(tmp_path: Path):
     (tmp_path / "a.yaml").write_text("extends: b.yaml\n")
     (tmp_path / "b.yaml").write_text("extends: a.yaml\n")

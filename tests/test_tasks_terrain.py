@@ -94,6 +94,7 @@ class TerrainSim:
     """A simulator with an analytic height field ``h(x, y)`` in a world turned by ``yaw`` and moved by ``shift``."""
 
     dt = 1.0 / 30.0
+    ground_contact = None  # no ground-only contacts: the task falls back to SimState.body_contact
 
     def __init__(self, yaw: float = 0.0, shift=(0.0, 0.0)):
         self.yaw, self.shift = yaw, torch.tensor(shift, dtype=F64)

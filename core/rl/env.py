@@ -60,6 +60,18 @@ class VecEnv(Protocol):
 
     def close(self) -> None: ...
 
-    # Optional: ``after_iteration(iteration, policy_fn) -> dict[str, float]`` is called by PPO
-    # after every iteration with a deterministic policy (obs -> action); an env uses it for
-    # periodic evaluation (e.g. hard-negative mining) and returns scalars to log under ``eval/``.
+
+@runtime_checkable
+class AfterIteration(Protocol):
+    """Optional VecEnv capability: PPO calls ``after_iteration`` after every iteration with the
+    deterministic policy (obs -> action); the env uses it for periodic evaluation (hard-negative
+    mining, task metrics) and returns scalars that PPO logs under ``eval/``."""
+
+    def after_iteration(self, iteration: int, policy_fn: Any) -> dict[str, float]: ...
+
+
+@runtime_checkable
+class OnDevice(Protocol):
+    """Optional VecEnv capability: the env takes its actions on ``device`` (default: the CPU)."""
+
+    device: Any

@@ -40,6 +40,7 @@ from mocap.checkpoint import load_checkpoint, save_checkpoint
 from mocap.faults import FaultGuard
 from mocap.interfaces import Box, MultiDiscrete, StageResult, Trainer
 from mocap.progress import IterationProgress
+from mocap.rl.env import AfterIteration, OnDevice
 from mocap.rl.networks import ActorCritic, init_from_policy, save_policy
 from mocap.rng import rng_state, set_rng_state
 from mocap.rl.ppo_params import DEFAULT_LOG_STD, PPOParams, adapt_lr, initial_log_std
@@ -163,7 +164,7 @@ class PPOTrainer(Trainer):
         p = self.params
         if p.torch_threads is not None:
             torch.set_num_threads(p.torch_threads)
-        device = torch.device(getattr(ctx, "device", "cpu"))
+        device = torch.device(ctx.device)
         workdir = Path(ctx.workdir)
         workdir.mkdir(parents=True, exist_ok=True)
         ckpt_path = workdir / CHECKPOINT_NAME
@@ -220,7 +221,7 @@ class PPOTrainer(Trainer):
         # the budget counts every rank's samples; alone this is p.iterations
         iterations = iteration + max(0, math.ceil((p.total_env_steps - env_steps) / (p.batch_size * world)))
 
-        env_device = torch.device(getattr(env, "device", "cpu"))  # actions go back to the env's device
+        env_device = torch.device(env.device if isinstance(env, OnDevice) else "cpu")  # actions go back to the env's device
         low = high = None
         if isinstance(space, Box) and (math.isfinite(space.low) or math.isfinite(space.high)):
             low, high = space.low, space.high
@@ -356,15 +357,14 @@ class PPOTrainer(Trainer):
                         log[f"episode/{key}"] = float(np.mean(vals))
                 for key, total in info_sums.items():
                     log[f"env/{key}"] = total / T
-                hook = getattr(env, "after_iteration", None)
-                if hook is not None:  # e.g. periodic evaluation for hard-negative mining
+                if isinstance(env, AfterIteration):  # e.g. periodic evaluation for hard-negative mining
 
                     def policy_fn(o: Tensor) -> Tensor:
                         model.eval()
                         with torch.no_grad():
                             return model.mean_action(o.to(device).float()).to(env_device)
 
-                    for key, val in (hook(iteration, policy_fn) or {}).items():
+                    for key, val in (env.after_iteration(iteration, policy_fn) or {}).items():
                         log[f"eval/{key}"] = float(val)
                 if parallel:  # one line for all ranks: sums, slowest times, means, pooled episode windows
                     log = dist.reduce_metrics(

@@ -63,7 +63,6 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any, Callable
 
-import numpy as np
 import torch
 from torch import Tensor
 
@@ -76,6 +75,7 @@ from mocap.pd_actions import ActionMap, pd_offset_scale
 from mocap.rl.env import StepResult
 from mocap.skeleton import Skeleton
 from mocap.start_sampling import AdaptiveStartSampler
+from mocap.sim_snapshot import load_sim_state, save_sim_state
 from mocap.state import HUMANOID_FIELDS, HumanoidState, MotionFrames, SimState
 from mocap_phc.amp import AMPHistory, AMPObservation, DiscriminatorTrainer, demo_windows, loss_config, window_frames
 from mocap.imitation_rewards import ImitationReward, energy_penalty
@@ -442,11 +442,7 @@ class ImitationEnv(ClipMining):
         if self.amp_trainer is not None:
             assert self.amp_history is not None
             sd["amp"] = {"history": self.amp_history.buf.clone(), "trainer": self.amp_trainer.state_dict()}
-        if hasattr(self.sim, "get_physics_state"):
-            sd["physics"] = torch.from_numpy(np.array(self.sim.get_physics_state(), dtype=np.float64, copy=True))
-        else:  # any Simulator: the kinematic state it can be reset to
-            s = self.sim.state
-            sd["sim_state"] = {k: getattr(s, k).cpu().clone() for k in _HUMANOID_FIELDS}
+        sd.update(save_sim_state(self.sim))
         return sd
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
@@ -481,15 +477,7 @@ class ImitationEnv(ClipMining):
                 raise ValueError("the saved AMP history has a different shape (history length or features)")
             self.amp_history.buf = state["amp"]["history"].clone()
             self.amp_trainer.load_state_dict(state["amp"]["trainer"])
-        ids = torch.arange(self.num_envs)
-        if "physics" in state and hasattr(self.sim, "set_physics_state"):
-            phys = state["physics"]
-            phys = phys.detach().cpu().numpy() if isinstance(phys, Tensor) else np.asarray(phys)
-            self.sim.set_physics_state(ids, np.array(phys, dtype=np.float64, copy=True))
-        elif "sim_state" in state:
-            self.sim.reset(ids, HumanoidState(**{k: v.to(dev) for k, v in state["sim_state"].items()}))
-        else:
-            raise ValueError("the saved env state has no simulator state usable by this simulator")
+        load_sim_state(self.sim, torch.arange(self.num_envs), state, dev)
         self._obs = self._observe(self.sim.state)
 
     def current_obs(self) -> Tensor:

@@ -209,7 +209,7 @@ class PHCImitator(PolicyImitator):
 
         skeleton = self.skeleton
         motion_set = ctx.build("motions").load(skeleton)
-        for path, reason in getattr(motion_set, "skipped", []):
+        for path, reason in motion_set.skipped:
             ctx.console.print(f"[yellow]skipped[/] {path}: {reason}")
         library = MotionLibrary(motion_set, skeleton)
         sim = ctx.build("simulator", skeleton=skeleton, num_envs=num_envs, seed=ctx.seed)

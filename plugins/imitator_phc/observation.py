@@ -69,6 +69,10 @@ class PolicyImitator(Imitator):
     def observe(self, state: SimState, reference: MotionFrames) -> Observations:
         return self.observation(state, reference)
 
+    @property
+    def proprio_sixd(self) -> str:
+        return self.observation.sixd
+
     def policy_action(self, flat_obs: Tensor, deterministic: bool = True) -> Tensor:
         if self.policy is None:
             raise RuntimeError("this imitator has no trained policy (build it with a checkpoint)")

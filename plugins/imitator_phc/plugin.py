@@ -87,7 +87,7 @@ def register_commands(app: Any) -> None:
         recorder = None
         if video is not None:
             probe = loaded.make_sim(1)
-            recorder = probe.make_recorder(ghost=True) if hasattr(probe, "make_recorder") else None
+            recorder = probe.make_recorder(ghost=True)
             probe.close()
         with Progress(console=console, transient=True) as bar:
             task = bar.add_task("recovery rollouts", total=int(round(seconds * 30)))

@@ -115,17 +115,19 @@ class PMCPTrainer(Trainer):
         self.workdir = Path(ctx.workdir)
         self.workdir.mkdir(parents=True, exist_ok=True)
         self.component = ctx.stage_component()
-        if not hasattr(self.component, "params") or not hasattr(self.component, "observation"):
+        from mocap_phc.imitator import PHCImitator
+
+        if not isinstance(self.component, PHCImitator):
             raise TypeError("the pmcp trainer needs the phc imitator")
         self.skeleton = self.component.skeleton
         motion_set = ctx.build("motions").load(self.skeleton)
-        for path, reason in getattr(motion_set, "skipped", []):
+        for path, reason in motion_set.skipped:
             ctx.console.print(f"[yellow]skipped[/] {path}: {reason}")
         self.clips = list(motion_set.clips)
         if not self.clips:
             raise ValueError("pmcp: the motion set has no clips")
         self.clip_names = unique_clip_names([c.name for c in self.clips])
-        if self.params.recovery is not None and getattr(self.component.params, "recovery_goal", None) is None:
+        if self.params.recovery is not None and self.component.params.recovery_goal is None:
             from mocap.errors import UserError
 
             raise UserError(

@@ -140,6 +140,8 @@ class HybridLatent(LatentSpace):
         action_dim: A, size of the teacher's raw policy output the decoder learns.
     """
 
+    samples_prior = True  # random_action samples the prior
+
     def __init__(self, params: HybridParams, proprio_dim: int, goal_dim: int, action_dim: int):
         super().__init__()
         self.params = params
@@ -216,7 +218,7 @@ class HybridLatent(LatentSpace):
         policy's input statistics (``teacher.policy.obs_norm`` over [s^p | s^g]) and freeze them."""
         if self.params.normalizer != "teacher":
             return
-        norm = getattr(getattr(teacher, "policy", None), "obs_norm", None)
+        norm = getattr(teacher.policy, "obs_norm", None)
         if not isinstance(norm, RunningNormalizer) or norm.shape != (self.proprio_dim + self.goal_dim,):
             raise ValueError(
                 "hybrid_rvq normalizer='teacher' needs a teacher policy with a running normalizer `obs_norm` over "

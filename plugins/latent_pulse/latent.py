@@ -101,6 +101,8 @@ class PulseLatent(LatentSpace):
         proprio_dim, goal_dim, action_dim: input and output sizes (see :func:`make_pulse`).
     """
 
+    samples_prior = True  # random_action samples the prior
+
     def __init__(self, params: PulseParams, proprio_dim: int, goal_dim: int, action_dim: int):
         super().__init__()
         p = self.params = params
@@ -159,7 +161,7 @@ class PulseLatent(LatentSpace):
         policy's input statistics (``teacher.policy.obs_norm`` over [s^p | s^g]) and freeze them ([CODE])."""
         if self.params.normalizer != "teacher":
             return
-        norm = getattr(getattr(teacher, "policy", None), "obs_norm", None)
+        norm = getattr(teacher.policy, "obs_norm", None)
         if not isinstance(norm, RunningNormalizer) or norm.shape != (self.proprio_dim + self.goal_dim,):
             raise ValueError(
                 "pulse normalizer='teacher' needs a teacher whose policy has a running normalizer `obs_norm` over "

@@ -83,6 +83,8 @@ class VmpParams(BaseModel):
 class VmpLatent(LatentSpace):
     """The VMP window VAE as a :class:`~mocap.interfaces.LatentSpace` (module docstring)."""
 
+    samples_prior = True  # random_action samples the prior
+
     def __init__(self, params: VmpParams, skeleton: Skeleton):
         super().__init__()
         self.params = params

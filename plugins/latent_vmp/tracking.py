@@ -170,7 +170,7 @@ class VmpTracker:
 
         latent = self._latent(ctx)
         motion_set = ctx.build("motions").load(self.skeleton)
-        for path, reason in getattr(motion_set, "skipped", []):
+        for path, reason in motion_set.skipped:
             ctx.console.print(f"[yellow]skipped[/] {path}: {reason}")
         library = MotionLibrary(motion_set, self.skeleton)
         sim = ctx.build("simulator", skeleton=self.skeleton, num_envs=num_envs, seed=ctx.seed)

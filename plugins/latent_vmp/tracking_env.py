@@ -9,7 +9,6 @@ from __future__ import annotations
 import math
 from typing import Any
 
-import numpy as np
 import torch
 from torch import Tensor
 
@@ -17,7 +16,8 @@ from mocap.motion.library import grid_start_times
 from mocap.observations import proprioception, proprioception_dim
 from mocap.rl.env import StepResult
 from mocap.skeleton import Skeleton
-from mocap.state import HUMANOID_FIELDS, HumanoidState, SimState
+from mocap.sim_snapshot import load_sim_state, save_sim_state
+from mocap.state import HumanoidState, SimState
 from mocap_vmp.randomization import DomainRandomizer
 from mocap_vmp.tracking_conditioning import VmpConditioning, _action_map, _clean, clip_frames, hold_action
 from mocap_vmp.tracking_params import VmpTrackerParams
@@ -259,11 +259,7 @@ class VmpTrackingEnv:
             "generator": self._gen.get_state().clone(),
             **{k: getattr(self, k).cpu().clone() for k in _COUNTERS},
         }
-        if hasattr(self.sim, "get_physics_state"):
-            sd["physics"] = torch.from_numpy(np.array(self.sim.get_physics_state(), dtype=np.float64, copy=True))
-        else:
-            s = self.sim.state
-            sd["sim_state"] = {f: getattr(s, f).cpu().clone() for f in _HUMANOID_FIELDS}
+        sd.update(save_sim_state(self.sim))
         if self.randomizer is not None:
             sd["randomization"] = self.randomizer.state_dict()
         return sd
@@ -278,18 +274,7 @@ class VmpTrackingEnv:
         self._gen.set_state(state["generator"].clone())
         for k in _COUNTERS:
             setattr(self, k, state[k].to(self.device).clone())
-        ids = torch.arange(self.num_envs)
-        if "physics" in state and hasattr(self.sim, "set_physics_state"):
-            phys = state["physics"]
-            phys = phys.detach().cpu().numpy() if isinstance(phys, Tensor) else np.asarray(phys)
-            self.sim.set_physics_state(ids, np.array(phys, dtype=np.float64, copy=True))
-        elif "sim_state" in state:
-            self.sim.reset(
-                ids,
-                HumanoidState(**{k: v.to(self.device) for k, v in state["sim_state"].items()}),
-            )
-        else:
-            raise ValueError("the saved env state has no simulator state usable by this simulator")
+        load_sim_state(self.sim, torch.arange(self.num_envs), state, self.device)
         if self.randomizer is not None and "randomization" in state:
             self.randomizer.load_state_dict(state["randomization"])
         self._obs = self._observe(self.sim.state)
@@ -305,4 +290,3 @@ _COUNTERS = (
     "hist_actions",
     "hist_targets",
 )
-_HUMANOID_FIELDS = HUMANOID_FIELDS

@@ -12,6 +12,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import torch
+from mocap.interfaces import Simulator
 from mocap.rotations import heading_angle
 from mocap.skeleton import Skeleton
 from mocap.state import SimState
@@ -170,7 +171,7 @@ class TaskBase:
         )
         self.generator = torch.Generator(device="cpu")
         self.generator.manual_seed(int(seed))
-        self.sim: Any = None
+        self.sim: Simulator | None = None
         self.dt = 1.0 / 30.0
         #: (N,) control steps since the env's last reset (advanced by :meth:`step`)
         self.progress = torch.zeros(self.num_envs, dtype=torch.long, device=self.device)
@@ -195,16 +196,14 @@ class TaskBase:
         return torch.as_tensor(env_ids, dtype=torch.long).reshape(-1).to(self.device)
 
     # ------------------------------------------------------------------------ simulator
-    def attach(self, sim: Any) -> None:
+    def attach(self, sim: Simulator) -> None:
         """Keep the simulator (its control period ``dt``, ground-only contacts, props)."""
         self.sim = sim
-        dt = getattr(sim, "dt", None)
-        if dt is not None:
-            self.dt = float(dt)
+        self.dt = float(sim.dt)
 
     def _ground_contact(self, state: SimState) -> Tensor:
         """(N, B) ground-only contacts: the simulator's ``ground_contact`` when attached and it has one."""
-        gc = getattr(self.sim, "ground_contact", None) if self.sim is not None else None
+        gc = self.sim.ground_contact if self.sim is not None else None
         if isinstance(gc, Tensor) and gc.shape == state.body_contact.shape:
             return gc.to(state.body_contact.device)
         return state.body_contact

@@ -208,9 +208,8 @@ class TerrainTask(TaskBase, Task):
     # -------------------------------------------------------------------------- terrain
     def height_at(self, xy: Tensor) -> Tensor:
         """Ground height (...) at world ``xy`` (..., 2): the attached simulator's, else 0."""
-        fn = getattr(self.sim, "height_at", None) if self.sim is not None else None
-        if callable(fn):
-            return fn(xy).to(xy)
+        if self.sim is not None:
+            return self.sim.height_at(xy).to(xy)
         return torch.zeros(xy.shape[:-1], dtype=xy.dtype, device=xy.device)
 
     def start_state(self, env_ids: Tensor, frames: HumanoidState) -> HumanoidState:

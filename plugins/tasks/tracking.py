@@ -137,6 +137,7 @@ RIGHT_HAND_NAMES: tuple[str, ...] = ("right_hand", "R_Hand")
 class TrackingTask(TaskBase, Task):
     """Reference bookkeeping, starts, truncation, termination and metrics shared by the three tasks."""
 
+    tracks_reference = True  # the env calls reference_start and starts episodes on the control grid
     goal_dim: int
     #: body indices whose mean error decides ``success``
     success_bodies: Tensor
@@ -153,9 +154,9 @@ class TrackingTask(TaskBase, Task):
                 f"task {type(self).__name__} follows a reference motion: build it with motions=<MotionLibrary> "
                 "(the task stage's env does)"
             )
-        if not hasattr(motions, "frames"):
-            from mocap.motion.library import MotionLibrary
+        from mocap.motion.library import MotionLibrary
 
+        if not isinstance(motions, MotionLibrary):  # a MotionSet: indexed into a library here
             motions = MotionLibrary(motions, skeleton)
         self.library = motions
         self.episode_steps = int(params.episode_steps)
