@@ -44,7 +44,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from torch import Tensor
 
 from mocap.hooks import hookimpl
-from mocap.interfaces import Imitator, Simulator
+from mocap.interfaces import Imitator, Simulator, Trainer
 from mocap.motion.library import MotionLibrary
 from mocap.observations import proprioception
 from mocap.rotations import heading_quat, quat_apply, quat_conjugate
@@ -287,7 +287,7 @@ def generate_from_target(loaded: Any, params: GenerationParams, *, video: Path |
 
 
 # ------------------------------------------------------------------------------ registration
-class GenerationEval:
+class GenerationEval(Trainer):
     """Trainer ``generation_eval``: :func:`evaluate_generation` of the spec's trained latent space;
     publishes ``generation.json`` / ``generation.md`` (and ``generation.mp4``) in the run directory."""
 

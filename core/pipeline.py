@@ -38,7 +38,7 @@ from rich.console import Console
 
 from mocap import distributed as dist
 from mocap.checkpoint import atomic_write_json, atomic_write_text, hardware, package_versions
-from mocap.interfaces import MotionSource, RLTrainable, StageResult
+from mocap.interfaces import MotionSource, RLTrainable, StageResult, Trainer
 from mocap.fingerprint import file_digest, files_fingerprint
 from mocap.motion.clip import MotionDataError
 from mocap.plugins import PluginError, PluginSet, UnknownComponent
@@ -342,8 +342,15 @@ def _preflight(resolved: ResolvedSpec, plugins: PluginSet, keys: dict[str, str],
             continue
         if (store / f"{stage}-{key}" / DONE_FILE).is_file():
             continue
-        trainer = plugins.get("trainer", section.trainer.name).build(resolved.params.get(f"{stage}.trainer"))
+        trainer = _as_trainer(plugins.get("trainer", section.trainer.name).build(resolved.params.get(f"{stage}.trainer")), section.trainer.name)
         trainer.preflight(resolved, plugins)
+
+
+def _as_trainer(trainer: Any, name: str) -> Trainer:
+    """``trainer`` if it is a :class:`~mocap.interfaces.Trainer`, else a one-line plugin error."""
+    if not isinstance(trainer, Trainer):
+        raise PluginError(f"trainer {name!r} built a {type(trainer).__name__}, not a mocap.interfaces.Trainer")
+    return trainer
 
 
 def _run_pipeline_locked(
@@ -485,7 +492,7 @@ def _run_stage_locked(
         console=console,
         _stop=lambda: stop.requested,
     )
-    trainer = ctx.build(f"{stage}.trainer")
+    trainer = _as_trainer(ctx.build(f"{stage}.trainer"), trainer_ref.name)
     resuming = any(workdir.glob("*.pt"))
     if main and not resuming:  # rows of an earlier attempt killed before its first checkpoint (e.g. an eval stage)
         log.truncate_after(-1)

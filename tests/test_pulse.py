@@ -341,7 +341,7 @@ def test_normalizers_running_teacher_and_none():
     frozen.update_normalizers(obs)
     assert torch.equal(frozen.proprio_norm.mean, before) and frozen.proprio_norm.frozen
     with pytest.raises(ValueError, match="normalizer='running'"):
-        tiny_latent(normalizer="teacher").init_from_teacher(object())
+        tiny_latent(normalizer="teacher").init_from_teacher(type("NoPolicy", (), {"policy": None})())  # Imitator.policy default
     raw = tiny_latent(normalizer="none")
     raw.update_normalizers(obs)
     assert float(raw.proprio_norm.count) == 0

@@ -193,6 +193,7 @@ class _Ctx:
 
         self.workdir = workdir
         self.seed = 0
+        self.device = "cpu"  # a StageContext field PPO reads
         self.make_rl_env = make_env
         self.log = MetricsLogger(workdir / "metrics.jsonl", "task")
         self.console = Console(quiet=True)

@@ -155,8 +155,9 @@ class TrackingTask(TaskBase, Task):
                 "(the task stage's env does)"
             )
         from mocap.motion.library import MotionLibrary
+        from mocap.motion.sources import MotionSet
 
-        if not isinstance(motions, MotionLibrary):  # a MotionSet: indexed into a library here
+        if isinstance(motions, (MotionSet, list, tuple)):  # clips, not yet a library: indexed here
             motions = MotionLibrary(motions, skeleton)
         self.library = motions
         self.episode_steps = int(params.episode_steps)
