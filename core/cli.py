@@ -357,9 +357,10 @@ def main(argv: list[str] | None = None) -> int:
         err_console.print(f"[red]error:[/] {message}", highlight=False)
         return EXIT_USER_ERROR
     except Exception as exc:  # usage errors of typer's (vendored) click arrive here in non-standalone mode
-        if callable(getattr(exc, "show", None)) and isinstance(getattr(exc, "exit_code", None), int):
-            exc.show()
-            return exc.exit_code
+        show, exit_code = getattr(exc, "show", None), getattr(exc, "exit_code", None)
+        if callable(show) and isinstance(exit_code, int):
+            show()
+            return exit_code
         if type(exc).__name__ == "Abort":
             err_console.print("[yellow]aborted[/]")
             return EXIT_INTERRUPTED

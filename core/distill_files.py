@@ -37,7 +37,9 @@ def load_latent_state(path: Path, map_location: str | torch.device = "cpu") -> d
     if fmt == LATENT_FORMAT:
         return {"config": data.get("config"), "state_dict": data["state_dict"], "extra": data.get("extra", {}), "spec": data.get("spec")}
     if fmt == CHECKPOINT_FORMAT:  # a training checkpoint: the label it trains on is in its params (latent.pt keeps it in extra)
-        params = data.get("params") if isinstance(data.get("params"), dict) else {}
+        params = data.get("params")
+        if not isinstance(params, dict):
+            params = {}
         extra = {"label": params["label"]} if isinstance(params.get("label"), str) else {}
         return {"config": data.get("latent_config"), "state_dict": data["student"], "extra": extra, "spec": data.get("spec")}
     raise CheckpointError(f"{path}: not a distilled latent-space file (format {fmt!r}, expected {LATENT_FORMAT!r} or {CHECKPOINT_FORMAT!r})")

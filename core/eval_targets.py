@@ -194,9 +194,9 @@ def load_evaluation_target(target: Path, plugins: Any) -> EvalTarget:
 
             resolved = validate_document(read_spec_file(spec_file), plugins, source=str(spec_file))
             found: dict[str, Path] = {}
-            for stage in read_stages(stages_file):
-                if stage["stage"] in ("imitator", "latent") and stage.get("checkpoint"):
-                    found[stage["stage"]] = Path(stage["checkpoint"])
+            for record in read_stages(stages_file):
+                if record["stage"] in ("imitator", "latent") and record.get("checkpoint"):
+                    found[record["stage"]] = Path(record["checkpoint"])
             if resolved.spec.imitator is None and "latent" not in found:
                 raise UserError(f"{spec_file}: the run has no imitator or trained latent stage to evaluate")
             from mocap.pipeline import resolved_stage_keys

@@ -165,6 +165,7 @@ def evaluate_imitator(
             sim.close()
             for m in metrics:
                 per_episode[m.name].append(m(out.traj).double())
+            assert out.traj.mask is not None  # rollout_imitation always records the mask
             lengths.append((out.traj.mask.sum(0).double() - 1).clamp_min(0) * dt)
             instab.append(out.unstable)
             bar.advance(task, len(ids))
@@ -273,6 +274,7 @@ class ImitationEval(Trainer):
                 ctx.console.print(f"imitation_eval: evaluating the {ctx.spec.latent.name} latent's own tracking policy")
             else:
                 label = load_latent_state(latent_stage.checkpoint)["extra"].get("label", "policy_output")
+                assert imitator is not None  # a latent that does not drive PD targets itself was distilled from the spec's imitator
                 imitator = latent_imitator(PDTargetTeacher(imitator) if label == "pd_targets" else imitator, latent)
                 ctx.console.print(f"imitation_eval: evaluating the {ctx.spec.latent.name} latent (z = encoder mean)")
         elif p.target == "latent":

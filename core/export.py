@@ -73,7 +73,9 @@ def resolve_embedded_paths(doc: Any, base: Path) -> Any:
         return doc
     for stage in STAGE_SECTIONS:
         section = doc.get(stage)
-        ck = section.get("checkpoint") if isinstance(section, dict) else None
+        if not isinstance(section, dict):
+            continue
+        ck = section.get("checkpoint")
         if isinstance(ck, str) and ck and not Path(ck).is_absolute():
             section["checkpoint"] = str(Path(base) / ck)
     return doc
@@ -87,7 +89,9 @@ def relative_spec_text(spec_yaml: str, dest: Path, *, root_map: tuple[str, str] 
         return spec_yaml
     for stage in STAGE_SECTIONS:
         section = doc.get(stage)
-        ck = section.get("checkpoint") if isinstance(section, dict) else None
+        if not isinstance(section, dict):
+            continue
+        ck = section.get("checkpoint")
         if not (isinstance(ck, str) and ck):
             continue
         path = ck

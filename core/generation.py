@@ -46,7 +46,7 @@ from torch import Tensor
 from mocap.hooks import hookimpl
 from mocap.interfaces import Imitator, Simulator, Trainer
 from mocap.motion.library import MotionLibrary
-from mocap.observations import proprioception
+from mocap.observations import SixD, proprioception
 from mocap.rotations import heading_quat, quat_apply, quat_conjugate
 from mocap.state import Observations
 from mocap.termination import allowed_contact_mask
@@ -130,7 +130,7 @@ def motion_matching(generated: Tensor, dataset: Tensor, threshold: float, chunk:
     }
 
 
-def dataset_transitions(lib: MotionLibrary, dt: float, sixd: str = "zhou") -> Tensor:
+def dataset_transitions(lib: MotionLibrary, dt: float, sixd: SixD = "zhou") -> Tensor:
     """(K, 2P) proprioception pairs (s_{t-1}, s_t) of every clip sampled at the control rate."""
     rows = []
     for c in range(lib.num_clips):
@@ -319,7 +319,11 @@ class GenerationEval(Trainer):
         def make_sim(n: int) -> Simulator:
             return ctx.build("simulator", skeleton=skeleton, num_envs=n, seed=ctx.seed)
 
-        mapping = (lambda obs, out: out) if label == "pd_targets" else imitator.to_pd_targets
+        if label == "pd_targets":
+            mapping = lambda obs, out: out
+        else:  # a latent distilled from policy outputs: the spec has the imitator that maps them
+            assert imitator is not None
+            mapping = imitator.to_pd_targets
         try:
             result = evaluate_generation(latent, imitator, mapping, lib, make_sim, self.params, video=ctx.publish("generation.mp4"), console=ctx.console)
         except ValueError as exc:

@@ -50,7 +50,7 @@ from torch import Tensor
 from mocap.hooks import hookimpl
 from mocap.interfaces import Box, LatentSample, LatentSpace, MultiDiscrete, Simulator, Task
 from mocap.motion.library import MotionLibrary, grid_start_times
-from mocap.observations import proprioception
+from mocap.observations import SixD, proprioception
 from mocap.rl.env import StepResult
 from mocap.sim_snapshot import load_sim_state, save_sim_state
 from mocap.skeleton import Skeleton
@@ -69,6 +69,9 @@ class ScratchParams(BaseModel):
 
 class ScratchLatent(LatentSpace):
     """No latent space: the task action is the normalized PD target (module docstring)."""
+
+    offset: Tensor  # buffers (register_buffer in __init__)
+    scale: Tensor
 
     def __init__(self, params: ScratchParams, skeleton: Skeleton):
         super().__init__()
@@ -113,7 +116,7 @@ class TaskEnv:
         sim: Simulator,
         *,
         seed: int = 0,
-        sixd: str = "zhou",
+        sixd: SixD = "zhou",
         start_min_height: float = 0.25,
     ):
         self.task, self.latent, self.map_targets = task, latent, to_pd_targets
@@ -167,8 +170,8 @@ class TaskEnv:
             lib = self.library
             dur = lib.durations.to(times.device, torch.float64)[clip_ids]
             times = grid_start_times(times.to(torch.float64), dur, lib.loops[clip_ids], float(self.sim.dt))
-        frames: HumanoidState = self.library.frames(clip_ids, times)
-        frames = self.task.start_state(ids, frames)  # terrain spawn square, keyframe-sequence start
+        sampled = self.library.frames(clip_ids, times)
+        frames: HumanoidState = self.task.start_state(ids, sampled)  # terrain spawn square, keyframe-sequence start
         if isinstance(frames, MotionFrames):
             clip_ids, times = frames.clip_ids, frames.times
         self.sim.reset(ids, frames)

@@ -33,6 +33,7 @@ from mocap.skeleton import Skeleton
 from mocap.state import HumanoidState, MotionFrames, Observations, SimState, Trajectories
 
 if TYPE_CHECKING:  # pragma: no cover
+    from mocap.observations import SixD
     from mocap.pipeline import StageContext
 
 
@@ -160,7 +161,7 @@ class Imitator(ABC):
     policy: Any = None
 
     @property
-    def proprio_sixd(self) -> str:
+    def proprio_sixd(self) -> SixD:
         """The 6D-rotation layout of the imitator's proprioception (:func:`mocap.observations.proprioception`),
         which a latent space driving it must use too. Default ``"zhou"``."""
         return "zhou"
@@ -355,7 +356,7 @@ class Task(ABC):
     def attach_motions(self, library: Any) -> None:  # noqa: B027 - optional hook
         """Called once with the motion library (a :class:`mocap.motion.library.MotionLibrary`)."""
 
-    def start_state(self, env_ids: Tensor, frames: HumanoidState) -> HumanoidState:
+    def start_state(self, env_ids: Tensor, frames: MotionFrames) -> HumanoidState:
         """The start states of envs ``env_ids`` given the sampled reference ``frames`` (terrain spawn,
         keyframe sequences); a :class:`MotionFrames` result also says which clip and time were
         chosen. Default: the frames as sampled."""

@@ -136,7 +136,8 @@ def _build_tables(skeleton: Skeleton) -> _Tables:
     by_count: dict[int, list[int]] = {}
     for j in range(1, nb):
         by_count.setdefault(len(bodies[j].joint.hinges), []).append(j)
-    groups, order = [], []
+    groups: list[tuple[int, np.ndarray, np.ndarray]] = []
+    order: list[int] = []
     for k in sorted(by_count):
         joints = by_count[k]
         dofs = np.array([list(range(slices[j].start, slices[j].stop)) for j in joints], dtype=np.int64).reshape(len(joints), k)

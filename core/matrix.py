@@ -44,7 +44,7 @@ import sys
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 from mocap.metric_display import format_cell, mean_ci95, metric_label
 from mocap.spec import SpecError, SpecIssue, _rebase_paths, apply_overrides, extends_hints, load_document, validate_document
@@ -307,19 +307,30 @@ def _stage_metrics(cell_dir: Path) -> dict[str, float]:
     return out
 
 
+class MetricSummary(TypedDict):
+    """One metric of a comparison group (``comparison.json``'s ``groups``): mean over the group's runs,
+    sample std and 95% half-width of the mean (None for a single run), number of runs."""
+
+    mean: float
+    std: float | None
+    ci95: float | None
+    n: int
+
+
 def comparison(cells: list[Cell], out_dir: Path, seed_axis: str = "seed") -> dict[str, Any]:
     """Per-cell final metrics and, grouped over ``seed_axis``, mean and std (written as JSON + markdown)."""
-    rows = {c.name: {"labels": c.labels, "metrics": _stage_metrics(out_dir / c.name)} for c in cells}
+    metrics = {c.name: _stage_metrics(out_dir / c.name) for c in cells}
+    rows = {c.name: {"labels": c.labels, "metrics": metrics[c.name]} for c in cells}
     groups: dict[str, list[str]] = {}
     for c in cells:
         key = ", ".join(f"{p.split('.')[-1]}={v}" for p, v in c.labels.items() if p != seed_axis) or "all"
         groups.setdefault(key, []).append(c.name)
-    summary: dict[str, dict[str, dict[str, float]]] = {}
+    summary: dict[str, dict[str, MetricSummary]] = {}
     for key, names in groups.items():
-        metric_names = sorted(set().union(*(rows[n]["metrics"].keys() for n in names)))
+        metric_names = sorted(set().union(*(metrics[n].keys() for n in names)))
         summary[key] = {}
         for m in metric_names:
-            vals = [rows[n]["metrics"][m] for n in names if m in rows[n]["metrics"]]
+            vals = [metrics[n][m] for n in names if m in metrics[n]]
             mean, half = mean_ci95(vals)
             std = math.sqrt(sum((v - mean) ** 2 for v in vals) / (len(vals) - 1)) if len(vals) > 1 else None
             summary[key][m] = {"mean": mean, "std": std, "ci95": half, "n": len(vals)}
@@ -331,7 +342,7 @@ def comparison(cells: list[Cell], out_dir: Path, seed_axis: str = "seed") -> dic
     return data
 
 
-def _plots(groups: dict[str, list[str]], summary: dict[str, dict[str, dict[str, float]]], out_dir: Path) -> list[tuple[str, str]]:
+def _plots(groups: dict[str, list[str]], summary: dict[str, dict[str, MetricSummary]], out_dir: Path) -> list[tuple[str, str]]:
     """Learning curves with a seed band and final-metric bars (:func:`mocap.report.write_comparison_plots`):
     ``[(file name, caption)]``, or ``[("", note)]`` when plots cannot be made."""
     from mocap.report import COMPARISON_CURVES, PlotsUnavailable, write_comparison_plots
@@ -380,7 +391,7 @@ KEY_METRICS = (
 )
 
 
-def render(summary: dict[str, dict[str, dict[str, float]]]) -> str:
+def render(summary: dict[str, dict[str, MetricSummary]]) -> str:
     present = [m for m in KEY_METRICS if any(m in g for g in summary.values())]
     if not present:
         present = sorted(set().union(*(g.keys() for g in summary.values())))[:8]

@@ -203,6 +203,7 @@ class StageContext:
         if stage == "latent" and checkpoint is not None:
             from mocap.distill_files import check_latent_loaded
 
+            assert self.spec.latent is not None  # the latent component was just built from it
             check_latent_loaded(component, Path(checkpoint), self.spec.latent.name)
         return component
 
@@ -453,14 +454,13 @@ def _run_stage_locked(
     # rank 0 decides (under the artifact lock) and the other ranks take its answer
     reuse = dist.broadcast_object(_read_result(done) if main and done.is_file() else None)
     if reuse is not None:
-        result = reuse
         console.print(f"[green]{stage}[/]: reusing the trained artifact {workdir} (same {stage} section and upstream as an earlier run)")
         published = workdir / PUBLISHED_DIR
         if main and published.is_dir():  # the stage's tables and videos belong in this run directory too
             for item in published.iterdir():
                 if item.is_file():
                     shutil.copy2(item, out_dir / item.name)
-        return StageRecord(stage, key, workdir, result, True, 0.0, _read_seconds(done) if main else None)
+        return StageRecord(stage, key, workdir, reuse, True, 0.0, _read_seconds(done) if main else None)
     checkpoint = getattr(section, "checkpoint", None)
     if checkpoint is not None:
         if not dist.broadcast_object(Path(checkpoint).is_file()):

@@ -183,7 +183,11 @@ def load_plugins(
     candidates = [c for c in candidates if c[0] not in local_names]  # a local plugin replaces an installed one
     for name, obj in extra:
         module = getattr(obj, "__name__", type(obj).__name__)
-        candidates.append((name, f"<local:{module}>", "-", lambda obj=obj: obj))
+
+        def local_loader(obj: object = obj) -> object:
+            return obj
+
+        candidates.append((name, f"<local:{module}>", "-", local_loader))
 
     for name, package, version, loader in candidates:
         if allow is not None and name not in allow:

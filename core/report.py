@@ -18,13 +18,14 @@ import json
 import math
 import platform
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import TYPE_CHECKING, Any, Sequence, TypeGuard
 
 from mocap.checkpoint import atomic_write_text, hardware, package_versions
 from mocap.metric_display import metric_label
 from mocap.runfiles import read_stages
 
 if TYPE_CHECKING:  # pragma: no cover
+    from mocap.matrix import MetricSummary
     from mocap.pipeline import StageRecord
     from mocap.spec import ResolvedSpec
 
@@ -176,7 +177,7 @@ def read_metrics(path: Path) -> list[dict[str, Any]]:
     return out
 
 
-def _finite(v: Any) -> bool:
+def _finite(v: Any) -> TypeGuard[float]:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(float(v))
 
 
@@ -257,7 +258,7 @@ def seed_band(series: Sequence[tuple[Sequence[float], Sequence[float]]]) -> tupl
 
 
 def write_comparison_plots(
-    groups: dict[str, list[Path]], summary: dict[str, dict[str, dict[str, float]]], metrics: Sequence[str], out_dir: Path
+    groups: dict[str, list[Path]], summary: dict[str, dict[str, MetricSummary]], metrics: Sequence[str], out_dir: Path
 ) -> list[Path]:
     """``comparison_curves.png`` (per group: mean ± std over its cells' seeds of every learning
     curve) and ``comparison_final.png`` (``metrics`` of ``summary`` as bars with std error bars).

@@ -140,12 +140,12 @@ def quat_from_axis_angle(axis: Tensor | Sequence[float], angle: Tensor | float) 
     """``(cos(angle/2), sin(angle/2) axis/|axis|)``; ``axis`` (..., 3), ``angle`` (...), broadcast."""
     dtype = _float_dtype(axis, angle)
     device = next((x.device for x in (axis, angle) if isinstance(x, Tensor)), None)
-    axis = torch.as_tensor(axis, dtype=dtype, device=device)
-    angle = torch.as_tensor(angle, dtype=dtype, device=device)
-    axis = axis / torch.linalg.vector_norm(axis, dim=-1, keepdim=True)
-    shape = torch.broadcast_shapes(axis.shape[:-1], angle.shape)
-    half = 0.5 * angle.expand(shape)
-    return torch.cat((torch.cos(half)[..., None], torch.sin(half)[..., None] * axis.expand(*shape, 3)), dim=-1)
+    ax = torch.as_tensor(axis, dtype=dtype, device=device)
+    ang = torch.as_tensor(angle, dtype=dtype, device=device)
+    ax = ax / torch.linalg.vector_norm(ax, dim=-1, keepdim=True)
+    shape = torch.broadcast_shapes(ax.shape[:-1], ang.shape)
+    half = 0.5 * ang.expand(shape)
+    return torch.cat((torch.cos(half)[..., None], torch.sin(half)[..., None] * ax.expand(*shape, 3)), dim=-1)
 
 
 def quat_from_rotvec(rv: Tensor) -> Tensor:

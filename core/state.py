@@ -14,6 +14,7 @@ Conventions (documented once, tested at the edges):
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields, replace
+from typing import Any, Self
 
 import torch
 from torch import Tensor
@@ -51,12 +52,14 @@ class HumanoidState:
     def num_envs(self) -> int:
         return int(self.root_pos.shape[0])
 
-    def index(self, ids: Tensor | slice) -> "HumanoidState":
+    def index(self, ids: Tensor | slice) -> Self:
         """Rows ``ids`` of every tensor field (same dataclass type)."""
-        return replace(self, **{f.name: _take(getattr(self, f.name), ids) for f in fields(self)})
+        rows: dict[str, Any] = {f.name: _take(getattr(self, f.name), ids) for f in fields(self)}
+        return replace(self, **rows)
 
-    def to(self, device: torch.device | str) -> "HumanoidState":
-        return replace(self, **{f.name: _to(getattr(self, f.name), device) for f in fields(self)})
+    def to(self, device: torch.device | str) -> Self:
+        moved: dict[str, Any] = {f.name: _to(getattr(self, f.name), device) for f in fields(self)}
+        return replace(self, **moved)
 
 
 #: the tensor fields of :class:`HumanoidState`, in declaration order

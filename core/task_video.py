@@ -82,15 +82,15 @@ def render_task(
         if recorder is None:
             raise UserError(f"the {type(env.sim).__name__} simulator cannot render videos")
         space = env.action_space
-        bounded = isinstance(space, Box) and (space.low != float("-inf") or space.high != float("inf"))
+        bounds = (space.low, space.high) if isinstance(space, Box) and (space.low != float("-inf") or space.high != float("inf")) else None
         obs = env.reset()
         steps = max(1, int(round(seconds / float(env.sim.dt))))
         episodes = falls = 0
         for _ in range(steps):
             with torch.no_grad():
                 action = policy.mean_action(obs)
-            if bounded:
-                action = action.clamp(space.low, space.high)
+            if bounds is not None:
+                action = action.clamp(*bounds)
             result = env.step(action)
             obs = result.obs
             recorder.add_frame(env.sim.state, markers=env.task.markers(0))
@@ -101,6 +101,7 @@ def render_task(
     finally:
         env.close()
     spec = resolved.spec
+    assert spec.task is not None and spec.latent is not None  # make_task_env built the env from both
     return Path(out), (
         f"task {spec.task.name} through {spec.latent.name}, {steps} frames, {steps * float(env.sim.dt):.2f} s, "
         f"{episodes} episode end(s) of which {falls} terminated"

@@ -110,17 +110,20 @@ def test_sigkill_at_random_moments_then_resume(tmp_path: Path):
 
 @pytest.mark.slow
 def test_a_campaign_of_twenty_sigkills_ends_bit_exact(tmp_path: Path):
-    """The reliability campaign: 20 SIGKILLs at random iterations and random moments within them
-    (mid-write included), each followed by the same command; the result equals the uninterrupted run."""
+    """The reliability campaign: 20 SIGKILLs, 17 at random iterations and random moments within them
+    (mid-write included) and 3 after the last iteration (final checkpoint, policy file, report),
+    each followed by the same command; the result equals the uninterrupted run."""
     spec = tmp_path / "point.yaml"
     spec.write_text(SPEC)
     straight = tmp_path / "a" / "runs" / "point"
     _run(spec, straight)
     killed = tmp_path / "b" / "runs" / "point"
     rng = random.Random(20)
-    for kill_at in sorted(rng.sample(range(1, 31), 20)):
-        _run(spec, killed, kill_at=kill_at, delay=rng.uniform(0.0, 0.2))
+    moments = [(k, rng.uniform(0.0, 0.2)) for k in sorted(rng.sample(range(1, 31), 17))] + [(32, d) for d in (0.0, 0.05, 0.15)]
+    for kill_at, delay in moments:
+        _run(spec, killed, kill_at=kill_at, delay=delay)
     _run(spec, killed)
+    assert (killed / "report.md").is_file()
     assert not sorted((killed.parent / "artifacts").glob("**/.*.tmp"))
     a, b = load_checkpoint(_task_dir(straight) / "ppo.pt"), load_checkpoint(_task_dir(killed) / "ppo.pt")
     for key, value in a["model"].items():

@@ -52,8 +52,8 @@ TINY: dict[str, list[str] | None] = {
     ],
     "mocap eval runs/imitator-amp-bundled --json eval.json --video videos/": None,
     "mocap run specs/latent/pulse_amp.yaml": [
-        "--set", "latent.trainer.params.num_envs=4", "--set", "latent.trainer.params.horizon=8",
-        "--set", "latent.trainer.params.total_env_steps=64", "--set", "motions.params.clips=[walk]",
+        "--set", "latent.trainer.params.num_envs=16", "--set", "latent.trainer.params.horizon=8",
+        "--set", "latent.trainer.params.total_env_steps=128", "--set", "motions.params.clips=[walk]",
         "--set", "eval=null",
     ],
     "mocap eval checkpoints/imitator_amp": None,

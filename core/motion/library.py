@@ -513,7 +513,7 @@ class ControlGrid:
         loops = lib._loops.cpu()
         lengths = torch.where(loops, last + 1 + steps_past_end, last + 2)
         B, D = lib.skeleton.num_bodies, lib.skeleton.num_dofs
-        widths = {"root_pos": (3,), "root_rot": (4,), "root_lin_vel": (3,), "root_ang_vel": (3,), "dof_pos": (D,), "dof_vel": (D,)}
+        widths: dict[str, tuple[int, ...]] = {"root_pos": (3,), "root_rot": (4,), "root_lin_vel": (3,), "root_ang_vel": (3,), "dof_pos": (D,), "dof_vel": (D,)}
         widths.update({"body_pos": (B, 3), "body_rot": (B, 4), "body_lin_vel": (B, 3), "body_ang_vel": (B, 3), "times": ()})
         layout, col = [], 0
         for name in GRID_FIELDS:

@@ -153,7 +153,7 @@ class ActorCritic(nn.Module):
                 raise ValueError(f"Box action spaces must be 1-D, got shape {action_space.shape}")
             self.action_dim = action_space.shape[0]
             self.action_head = nn.Linear(feat_a, self.action_dim)
-            self.log_std = nn.Parameter(torch.full((self.action_dim,), float(log_std_init)), requires_grad=learn_std)
+            self.log_std: nn.Parameter | None = nn.Parameter(torch.full((self.action_dim,), float(log_std_init)), requires_grad=learn_std)
             self.nvec: tuple[int, ...] = ()
         elif isinstance(action_space, MultiDiscrete):
             self.nvec = tuple(int(n) for n in action_space.nvec)
@@ -186,7 +186,7 @@ class ActorCritic(nn.Module):
         return self.value_norm.denormalize(value_raw) if self.normalize_value else value_raw
 
     def _split_logits(self, logits: Tensor) -> list[Tensor]:
-        return [torch.log_softmax(chunk, dim=-1) for chunk in torch.split(logits, self.nvec, dim=-1)]
+        return [torch.log_softmax(chunk, dim=-1) for chunk in torch.split(logits, list(self.nvec), dim=-1)]
 
     def _log_prob_entropy(self, head: Tensor, action: Tensor) -> tuple[Tensor, Tensor]:
         if self.is_gaussian:
@@ -325,7 +325,7 @@ def export_policy(source: Path, destination: Path, extra: dict[str, Any] | None 
     that trained it — without the optimizer and rollout state (a few MB instead of ~3x that)."""
     data = load_checkpoint(Path(source))
     model = load_policy(Path(source))
-    info = {k: data[k] for k in ("iteration", "env_steps") if k in data}
+    info: dict[str, Any] = {k: data[k] for k in ("iteration", "env_steps") if k in data}
     save_policy(Path(destination), model, extra={**info, **(extra or {})}, spec_yaml=data.get("spec"))
 
 

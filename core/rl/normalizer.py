@@ -32,7 +32,7 @@ from torch import Tensor, nn
 class Moments(NamedTuple):
     """Sample count, mean and population variance of a set of samples (float64 tensors)."""
 
-    count: Tensor
+    count: Tensor  # type: ignore[assignment]  # a field named like tuple.count (public name, kept)
     mean: Tensor
     var: Tensor
 

@@ -328,7 +328,11 @@ class PPOTrainer(Trainer):
                 if dist.check_inputs(guard, observations=b_obs, rewards=b_rew, advantages=advantages, returns=returns):
                     stats = self._update(model, optimizer, b_obs, b_act, b_logp, b_val, advantages, returns, guard)
                     if p.normalize_obs:  # after the update, so that rollout and update saw the same statistics
-                        dist.sync_normalizers(model.obs_norm, lambda x=b_obs: model.obs_norm.update(x))
+
+                        def update_obs_norm(x: Tensor = b_obs) -> None:
+                            model.obs_norm.update(x)
+
+                        dist.sync_normalizers(model.obs_norm, update_obs_norm)
                 t_update = time.perf_counter() - t1
                 iteration += 1
 

@@ -242,7 +242,7 @@ class ImitationEnv(ClipMining):
         self.start_time[ids] = t0
         self.progress[ids] = 0
         self.ep_return[ids] = 0.0
-        start = self.library.frames(clips, t0)
+        start: HumanoidState = self.library.frames(clips, t0)
         self.recovery_left[ids] = 0
         fs = self.params.fail_states
         if fs is not None and (fs.fall_init_prob > 0 or fs.far_init_prob > 0):
@@ -255,7 +255,7 @@ class ImitationEnv(ClipMining):
         if self.amp_history is not None:
             self._amp_fill(ids, self.sim.state.index(ids), clips, t0)
 
-    def _fail_starts(self, ids: Tensor, start: MotionFrames, fs: Any) -> HumanoidState:
+    def _fail_starts(self, ids: Tensor, start: HumanoidState, fs: Any) -> HumanoidState:
         """Replace some RSI starts by fallen states (at the reference root's xy) or far ones
         (:func:`mocap.fail_states.fail_starts`); those envs get a recovery window."""
         state, recovering = fail_starts(start, self._fall_pool, fs, self._gen)

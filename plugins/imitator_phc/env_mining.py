@@ -5,7 +5,7 @@ failure statistics and clip sampling weights (hard-negative mining) and :meth:`C
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import torch
 from torch import Tensor
@@ -13,11 +13,29 @@ from torch import Tensor
 from mocap.interfaces import Simulator
 from mocap_phc.observation import PolicyImitator
 
+if TYPE_CHECKING:  # pragma: no cover
+    from mocap.hard_negatives import FailureTracker
+    from mocap.motion.library import MotionLibrary
+    from mocap.pd_actions import ActionMap
+    from mocap_phc.imitator import PHCParams
+    from mocap_phc.observation import PHCObservation
+
 PolicyFn = Callable[[Tensor], Tensor]
 
 
 class ClipMining:
     """The hard-negative and per-clip evaluation methods of :class:`~mocap_phc.env.ImitationEnv` (module docstring)."""
+
+    # set by ImitationEnv.__init__ (declared here for the type checker only)
+    params: PHCParams
+    library: MotionLibrary
+    dt: float
+    observation: PHCObservation
+    action_map: ActionMap
+    failures: FailureTracker
+    last_evaluation: dict[str, Any] | None
+    _eval_factory: Callable[[int], Simulator] | None
+    _eval_sims: dict[int, Simulator]
 
     # ------------------------------------------------------------------ hard negatives
     @property

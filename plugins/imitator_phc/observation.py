@@ -11,7 +11,7 @@ import torch
 from torch import Tensor
 
 from mocap.interfaces import Imitator
-from mocap.observations import imitation_goal_dim, proprioception_and_goal, proprioception_dim
+from mocap.observations import SixD, imitation_goal_dim, proprioception_and_goal, proprioception_dim
 from mocap.pd_actions import ActionMap
 from mocap.state import HumanoidState, MotionFrames, Observations, SimState
 
@@ -70,7 +70,7 @@ class PolicyImitator(Imitator):
         return self.observation(state, reference)
 
     @property
-    def proprio_sixd(self) -> str:
+    def proprio_sixd(self) -> SixD:
         return self.observation.sixd
 
     def policy_action(self, flat_obs: Tensor, deterministic: bool = True) -> Tensor:

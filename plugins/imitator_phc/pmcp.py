@@ -367,6 +367,7 @@ class PMCPTrainer(Trainer):
         converged = env is not None and env.done
         if not (finished or converged):
             return False  # the user stopped; PPO saved ppo.pt
+        assert result.checkpoint is not None  # PPO always returns its policy / checkpoint file
         model = load_policy(result.checkpoint)
         save_policy(
             phase_dir / PRIMITIVE_NAME,
@@ -457,6 +458,7 @@ class PMCPTrainer(Trainer):
         ck = load_checkpoint(phase_dir / "ppo.pt")
         if not (bool(ck.get("finished")) or int(ck["iteration"]) >= p.composer_ppo.iterations):
             return False
+        assert result.checkpoint is not None  # PPO always returns its policy / checkpoint file
         state["composer"] = {
             "status": "trained",
             "iterations": int(ck["iteration"]),

@@ -4,7 +4,7 @@ the imitator acting with a composite (:class:`CompositeImitator`, what ``make_ph
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from typing import Any, Sequence, cast
 
 import torch
 from torch import Tensor, nn
@@ -64,7 +64,8 @@ class CompositePolicy(nn.Module):
 
     def primitive_means(self, obs: Tensor) -> Tensor:
         """(N, K, A) the primitives' deterministic actions, each on its own normalized observation."""
-        return torch.stack([p.mean_action(obs) for p in self.primitives], dim=-2)
+        primitives = cast("Sequence[ActorCritic]", self.primitives)  # an nn.ModuleList iterates as plain Modules
+        return torch.stack([p.mean_action(obs) for p in primitives], dim=-2)
 
     def weights(self, obs: Tensor) -> Tensor:
         return self.composer.mean_action(obs)

@@ -22,7 +22,7 @@ shared: [INF] shared, as in Liu et al. (2021), is the default.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import NamedTuple, Sequence, cast
 
 import torch
 from torch import Tensor, nn
@@ -98,11 +98,12 @@ class PartitionedVQ(nn.Module):
         indices = indices.long()
         if indices.shape[-1] != self.partitions:
             raise ValueError(f"expected {self.partitions} code indices per sample, got shape {tuple(indices.shape)}")
+        books = cast("Sequence[VectorQuantizer]", self.books)  # an nn.ModuleList indexes / iterates as plain Modules
         if self.shared:
-            book = self.books[0].embed
+            book = books[0].embed
             return book[indices.clamp(0, self.codebook_size - 1)].reshape(indices.shape[0], self.dim)
         return torch.cat(
-            [b.embed[indices[:, g].clamp(0, self.codebook_size - 1)] for g, b in enumerate(self.books)],
+            [b.embed[indices[:, g].clamp(0, self.codebook_size - 1)] for g, b in enumerate(books)],
             -1,
         )
 

@@ -85,6 +85,10 @@ class VmpLatent(LatentSpace):
 
     samples_prior = True  # random_action samples the prior
 
+    ee_index: Tensor  # buffers (register_buffer in __init__)
+    feat_mean: Tensor
+    feat_std: Tensor
+
     def __init__(self, params: VmpParams, skeleton: Skeleton):
         super().__init__()
         self.params = params

@@ -160,7 +160,7 @@ def discrete_mutual_information(a: Tensor, b: Tensor) -> float:
     p = joint / joint.sum()
     pa, pb = p.sum(1, keepdim=True), p.sum(0, keepdim=True)
     nz = p > 0
-    return float(max(0.0, (p[nz] * (p[nz] / (pa * pb).expand_as(p)[nz]).log()).sum()))
+    return max(0.0, float((p[nz] * (p[nz] / (pa * pb).expand_as(p)[nz]).log()).sum()))
 
 
 def quantile_bins(x: Tensor, bins: int) -> Tensor:

@@ -22,7 +22,7 @@ continues where it stopped.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -61,6 +61,9 @@ class VmpTrackParams(BaseModel):
 class SubContext:
     """A view of a :class:`~mocap.pipeline.StageContext` with its own ``workdir`` and ``log`` (and,
     for PPO, ``make_rl_env``); everything else is the parent's."""
+
+    #: set on the instance for PPO (declared for the type checker; unset, the parent's is used)
+    make_rl_env: Callable[[int], Any]
 
     def __init__(self, parent: Any, workdir: Path, log: Any, **extra: Any):
         self._parent = parent

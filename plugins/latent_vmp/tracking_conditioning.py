@@ -44,7 +44,7 @@ class VmpConditioning:
         if self.spec.use_z:
             saved = getattr(latent, "frame_latents", None)
             same = saved is not None and list(getattr(latent, "clip_names", [])) == list(library.clip_names)
-            if same and saved.shape[0] == library.total_frames:
+            if same and saved is not None and saved.shape[0] == library.total_frames:
                 self.frame_latents = saved.detach().to(dev, library.dtype)
             else:
                 self.frame_latents = latent.encode_library(library).detach().to(dev, library.dtype)

@@ -25,6 +25,7 @@ over the batch) with cyclical annealing of ``beta_eff``.
 from __future__ import annotations
 
 import math
+from typing import cast
 
 import torch
 from torch import Tensor, nn
@@ -143,7 +144,8 @@ def reconstruction_loss(x: Tensor, y: Tensor, layout: FeatureLayout) -> tuple[Te
     """Eq. 3: mean over frames (and windows) of the per-frame loss (Eq. 4); also each group's mean."""
     errs = per_frame_errors(x, y, layout)
     groups = {g: errs[g].mean() for g in GROUPS}
-    return sum(errs.values()).mean(), groups
+    total = cast(Tensor, sum(errs.values()))  # not the start value 0: the layout has groups
+    return total.mean(), groups
 
 
 def kl_divergence(mu: Tensor, logvar: Tensor) -> Tensor:

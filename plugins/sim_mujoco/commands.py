@@ -84,6 +84,7 @@ def cmd_render(
         _render_policy(target, out_path, clip, seconds, generate, noise, seed, imitator_only, width, height)
         return
 
+    assert motion is not None  # target is None here, and one of the two was given (checked above)
     mset, hname = load_motion_set(source, path, None, humanoid)
     names = [c.name for c in mset.clips]
     if motion not in names:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Callable
 
 import mujoco
 import numpy as np
@@ -16,6 +17,11 @@ from torch import Tensor
 from mocap.rotations import quat_apply, quat_normalize
 from mocap_sim_mujoco.readout import _FULL
 from mocap_sim_mujoco.terrain import height_map
+
+if TYPE_CHECKING:  # pragma: no cover
+    from mocap.state import SimState
+    from mocap_sim_mujoco.mujoco_params import MujocoParams
+    from mocap_sim_mujoco.terrain import Terrain
 
 __all__ = ["SimulatorExtras", "TargetState"]
 
@@ -34,6 +40,25 @@ class TargetState:
 
 class SimulatorExtras:
     """Mixin of :class:`~mocap_sim_mujoco.simulator.MujocoSimulator`: state access, props and terrain."""
+
+    # set or defined by MujocoSimulator (declared here for the type checker only)
+    params: MujocoParams
+    device: torch.device
+    dtype: torch.dtype
+    model: mujoco.MjModel
+    terrain: Terrain | None
+    _qp: int
+    _qv: int
+    _target_qpos: int
+    _target_qvel: int
+    _S: np.ndarray
+    _reset_S: np.ndarray
+    _ground_contact: np.ndarray
+    _markers: np.ndarray
+    _cached: SimState | None
+    _ids: Callable[[Tensor | np.ndarray | list[int]], np.ndarray]
+    _after_set: Callable[[np.ndarray], None]
+    _tensor: Callable[[np.ndarray], Tensor]
 
     # --------------------------------------------------------------------- extras
     @property
@@ -105,14 +130,16 @@ class SimulatorExtras:
     def target_state(self) -> TargetState:
         """Pose, velocities (world) and fallen flag of every env's target box."""
         self._need_target()
+        target = self.params.target
+        assert target is not None  # _need_target() raised otherwise
         a, v = self._target_qpos, self._target_qvel
         S = torch.from_numpy(self._S)
         pos, rot = S[:, a : a + 3], quat_normalize(S[:, a + 3 : a + 7])
         lin, ang = S[:, v : v + 3], quat_apply(rot, S[:, v + 3 : v + 6])  # free-joint angular velocity is local
         up_z = 1.0 - 2.0 * (rot[:, 1] ** 2 + rot[:, 2] ** 2)  # z component of the box's z axis
-        fallen = up_z < math.cos(math.radians(self.params.target.fallen_angle))  # type: ignore[union-attr]
-        out = (pos, rot, lin, ang)
-        return TargetState(*(t.to(self.device, self.dtype) for t in out), fallen=fallen.to(self.device))
+        fallen = up_z < math.cos(math.radians(target.fallen_angle))
+        pos, rot, lin, ang = (t.to(self.device, self.dtype) for t in (pos, rot, lin, ang))
+        return TargetState(pos, rot, lin, ang, fallen=fallen.to(self.device))
 
     def set_markers(self, env_ids: Tensor, positions: Tensor) -> None:
         """Marker positions (K, M, 3) of envs ``env_ids`` (visual only)."""

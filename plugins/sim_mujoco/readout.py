@@ -5,12 +5,21 @@ the solver warm start, the instability flags and the :class:`~mocap.state.SimSta
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import mujoco
 import numpy as np
+import numpy.typing as npt
 import torch
 from torch import Tensor
 
 from mocap.state import SimState
+
+if TYPE_CHECKING:  # pragma: no cover
+    from mujoco import rollout as mj_rollout
+
+    from mocap.skeleton import Skeleton
+    from mocap_sim_mujoco.mujoco_params import MujocoParams
 
 _FULL = mujoco.mjtState.mjSTATE_FULLPHYSICS
 _CTRL = int(mujoco.mjtState.mjSTATE_CTRL)
@@ -20,6 +29,39 @@ _KIN_FIELDS = 13  # framepos 3, framequat 4, framelinvel 3, frameangvel 3
 
 class StateReadout:
     """Mixin of :class:`~mocap_sim_mujoco.simulator.MujocoSimulator`: the per-step state extraction."""
+
+    # set by MujocoSimulator.__init__ (declared here for the type checker only)
+    params: MujocoParams
+    skeleton: Skeleton
+    num_envs: int
+    device: torch.device
+    dtype: torch.dtype
+    _np_dtype: npt.DTypeLike
+    model: mujoco.MjModel
+    nstate: int
+    _qv: int
+    _dof_qpos: np.ndarray
+    _dof_qvel: np.ndarray
+    _n_contact: int
+    _num_partners: int
+    _ground_partners: list[int]
+    _pool: mj_rollout.Rollout  # None after close()
+    _kin_model: mujoco.MjModel
+    _kin_models: list[mujoco.MjModel]
+    _kin_datas: list[mujoco.MjData]
+    _kin_chunk: int
+    _S: np.ndarray
+    _warm: np.ndarray
+    _ctrl1: np.ndarray
+    _traj: np.ndarray
+    _sens: np.ndarray
+    _kin_state: np.ndarray
+    _kin_sens: np.ndarray
+    _contact_force: np.ndarray
+    _body_contact: np.ndarray
+    _ground_contact: np.ndarray
+    _dof_force: np.ndarray
+    _unstable: np.ndarray
 
     def _update_warmstart(self, bad: np.ndarray) -> None:
         """Next step's solver warm start: the last substep's acceleration, ``(qvel_end - qvel_before) / h``

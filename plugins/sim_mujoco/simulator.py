@@ -186,7 +186,7 @@ class MujocoSimulator(StateReadout, SimulatorExtras, Simulator):
             f'<framelinvel objtype="xbody" objname="{b.name}"/><frameangvel objtype="xbody" objname="{b.name}"/>'
             for b in skeleton.bodies
         ]
-        common = dict(
+        common: dict[str, Any] = dict(
             timestep=p.timestep,
             iterations=p.iterations,
             ls_iterations=p.ls_iterations,

@@ -31,12 +31,15 @@ square are clamped to its edge.
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 import torch
 from pydantic import BaseModel, ConfigDict, Field
 from torch import Tensor
+
+if TYPE_CHECKING:  # pragma: no cover
+    import mujoco
 
 __all__ = ["Terrain", "TerrainParams", "TERRAIN_HFIELD"]
 
@@ -145,7 +148,7 @@ class Terrain:
             f'contype="1" conaffinity="1" friction="{friction:.9g} 0.005 0.0001"/>'
         )
 
-    def write_model(self, model: object) -> None:
+    def write_model(self, model: mujoco.MjModel) -> None:
         """Fill the compiled model's ``hfield_data`` (normalised to [0, 1] by the elevation)."""
         import mujoco
 

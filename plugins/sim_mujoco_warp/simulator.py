@@ -468,13 +468,16 @@ class MujocoWarpSimulator(Simulator):
     def target_state(self) -> TargetState:
         """Pose, velocities (world) and fallen flag of every env's target box."""
         self._need_target()
+        target = self.params.target
+        assert target is not None  # _need_target() raised otherwise
         a, v = self._target_qpos, self._target_qvel
         qp, qv = self._qpos.detach().double(), self._qvel.detach().double()
         pos, rot = qp[:, a : a + 3], quat_normalize(qp[:, a + 3 : a + 7])
         lin, ang = qv[:, v : v + 3], quat_apply(rot, qv[:, v + 3 : v + 6])
         up_z = 1.0 - 2.0 * (rot[:, 1] ** 2 + rot[:, 2] ** 2)
-        fallen = up_z < math.cos(math.radians(self.params.target.fallen_angle))  # type: ignore[union-attr]
-        return TargetState(*(x.to(self.device, self.dtype) for x in (pos, rot, lin, ang)), fallen=fallen.to(self.device))
+        fallen = up_z < math.cos(math.radians(target.fallen_angle))
+        pos, rot, lin, ang = (x.to(self.device, self.dtype) for x in (pos, rot, lin, ang))
+        return TargetState(pos, rot, lin, ang, fallen=fallen.to(self.device))
 
     def set_markers(self, env_ids: Tensor, positions: Tensor) -> None:
         """Marker positions (K, M, 3) of envs ``env_ids`` (visual only, kept on the host)."""

@@ -8,7 +8,7 @@ yaw of the whole world about z plus a translation leaves them unchanged.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import torch
@@ -149,7 +149,7 @@ class TaskBase:
 
     max_reward: float = 1.0
     #: simulator params the task needs (strike: the target prop); set per instance
-    sim_overrides: dict[str, Any]
+    sim_overrides: Mapping[str, Any]
 
     def _setup(
         self,
