@@ -280,7 +280,11 @@ def load_document(path: Path, _chain: tuple[Path, ...] = (), replaced: list[tupl
     ``replaced``: see :func:`deep_merge`."""
     path = Path(path)
     source = str(path)
-    if not path.is_file():
+    try:
+        found = path.is_file()
+    except OSError as exc:  # e.g. a name over 255 bytes (ENAMETOOLONG), from an `extends:` value
+        raise SpecError(source[:200], [SpecIssue("", f"cannot look up this spec file ({exc.strerror or exc})")]) from None
+    if not found:
         raise SpecError(source, [SpecIssue("", "no such spec file")])
     resolved = path.resolve()
     if resolved in _chain:

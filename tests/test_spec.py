@@ -107,6 +107,13 @@ def test_a_renamed_component_under_extends_explains_the_missing_trainer(tmp_path
     load_spec(tmp_path / "ok.yaml", PSET)  # no rename: the trainer merges as before
 
 
+def test_an_extends_name_too_long_for_the_os_is_a_spec_error(tmp_path: Path):
+    """Found by the 10,000-case fuzz run: `extends: <300 characters>` raised ENAMETOOLONG."""
+    (tmp_path / "child.yaml").write_text("extends: " + "x" * 300 + "\n" + TOY_SPEC)
+    with pytest.raises(SpecError, match="cannot look up this spec file"):
+        load_spec(tmp_path / "child.yaml", PSET)
+
+
 def test_extends_cycle_and_missing_base(tmp_path: Path):
     (tmp_path / "a.yaml").write_text("extends: b.yaml\n")
     (tmp_path / "b.yaml").write_text("extends: a.yaml\n")
