@@ -590,3 +590,24 @@ def test_export_policy_from_a_training_checkpoint(tmp_path):
     assert pairs and all(torch.equal(a, b) for a, b in pairs)
     data = load_checkpoint(tmp_path / "policy.pt")
     assert data["extra"] == {"iteration": 7, "env_steps": 700} and data["spec"] == "name: x\n" and "optimizer" not in data
+
+
+def test_init_lr_keeps_the_first_update_of_a_continued_policy_small(tmp_path: Path):
+    """A trained policy continued under a fresh Adam at a large lr is thrown far off in its first
+    update (the KL shock that cost the 15-clip imitator its skill); ``init_lr`` starts the adaptive
+    schedule low, so the first update stays near the rollout policy. Constant/linear schedules and
+    resumed stages keep ``lr``."""
+    trained = _train(tmp_path / "a", small_params())
+
+    def first_kl(name: str, init_lr: float | None) -> float:
+        cont = small_params(total_env_steps=32 * 32, init_policy=trained.checkpoint, lr=0.05, lr_schedule="adaptive", init_lr=init_lr)
+        _train(tmp_path / name, cont)
+        row = json.loads((tmp_path / name / "metrics.jsonl").read_text().splitlines()[0])
+        return float(row["approx_kl"])
+
+    shocked, gentle = first_kl("shock", None), first_kl("gentle", 1e-5)
+    assert gentle < 0.01 < shocked, (gentle, shocked)
+    p = small_params(init_policy=trained.checkpoint, lr_schedule="adaptive", init_lr=1e-5)
+    assert p.start_lr(fresh=True) == 1e-5 and p.start_lr(fresh=False) == p.lr
+    assert small_params(init_policy=trained.checkpoint, lr_schedule="constant", init_lr=1e-5).start_lr(True) == 3e-3
+    assert small_params(lr_schedule="adaptive").start_lr(True) == 3e-3  # no init_policy: a fresh network

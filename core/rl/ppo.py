@@ -183,7 +183,7 @@ class PPOTrainer(Trainer):
             ctx.console.print(f"ppo: starting from {p.init_policy}")
         parallel, world = dist.active(), dist.world_size()
         dist.broadcast_module(model)  # data-parallel: every rank starts from rank 0's weights
-        optimizer = torch.optim.Adam([q for q in model.parameters() if q.requires_grad], lr=p.lr)
+        optimizer = torch.optim.Adam([q for q in model.parameters() if q.requires_grad], lr=p.start_lr(fresh))
         window: dict[str, deque[float]] = {}
 
         iteration, env_steps = 0, 0
