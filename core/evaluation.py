@@ -30,7 +30,8 @@ from mocap.checkpoint import atomic_write_json, atomic_write_text
 from mocap.eval_targets import EvalTarget, LoadedTarget, build_evaluation_target, check_trained_humanoid, load_evaluation_target
 from mocap.hooks import hookimpl
 from mocap.interfaces import Imitator, Metric, Simulator, StageResult, Trainer
-from mocap.metrics import BUILTIN_METRICS, PROTOCOL, SuccessParams, _success_metric, default_metrics, make_metric
+from mocap.metric_display import MetricInfo
+from mocap.metrics import BUILTIN_DISPLAY, BUILTIN_METRICS, PROTOCOL, SuccessParams, _success_metric, default_metrics, make_metric
 from mocap.motion.library import MotionLibrary
 from mocap.pipeline import StageFailed
 from mocap.state import Trajectories
@@ -412,9 +413,23 @@ def _make_pd_replay(params: NoParams, **_: Any) -> Imitator:
     return PDReplay()
 
 
+#: the imitation protocol's aggregate metrics (each built-in metric also as ``<name>_succ``: its mean
+#: over the tracked clips), declared with the trainers below
+IMITATION_METRICS: dict[str, MetricInfo] = {
+    "success_rate": MetricInfo("success rate"),
+    "succeeded": MetricInfo("clips tracked"),
+    "total": MetricInfo("clips"),
+    "tracked_s": MetricInfo("tracked time", "s"),
+    "unstable_episodes": MetricInfo("unstable episodes"),
+    **{f"{k}_succ": MetricInfo(f"{v.display} (tracked)", v.unit) for k, v in BUILTIN_DISPLAY.items() if not k.startswith("success")},
+}
+
+
 @hookimpl
 def register_trainers(register):  # type: ignore[no-untyped-def]
-    register("imitation_eval", ImitationEval, params=ImitationEvalParams, description="evaluate an imitator on every clip")
+    register(
+        "imitation_eval", ImitationEval, params=ImitationEvalParams, description="evaluate an imitator on every clip", metrics=IMITATION_METRICS
+    )
     from mocap.suite import EvalSuite, EvalSuiteParams
 
     register(
@@ -422,6 +437,7 @@ def register_trainers(register):  # type: ignore[no-untyped-def]
         EvalSuite,
         params=EvalSuiteParams,
         description="imitation + random generation + the task stage's metrics of one cell, in one eval stage (comparisons)",
+        metrics=IMITATION_METRICS,
     )
 
 
@@ -519,9 +535,18 @@ def register_commands(app):  # type: ignore[no-untyped-def]
 @hookimpl
 def register_metrics(register):  # type: ignore[no-untyped-def]
     for name, (_, _, description) in BUILTIN_METRICS.items():
-        register(name, lambda name=name: make_metric(name), description=description)
-    register("success", lambda params: _success_metric(params, "mean"), params=SuccessParams, description="no frame over the mean-error threshold")
-    register("success_linf", lambda params: _success_metric(params, "max"), params=SuccessParams, description="no frame with any body over the threshold")
+        register(name, lambda name=name: make_metric(name), description=description, metrics={name: BUILTIN_DISPLAY[name]})
+    for name, reduce, what in (
+        ("success", "mean", "no frame over the mean-error threshold"),
+        ("success_linf", "max", "no frame with any body over the threshold"),
+    ):
+        register(
+            name,
+            lambda params, reduce=reduce: _success_metric(params, reduce),
+            params=SuccessParams,
+            description=what,
+            metrics={name: BUILTIN_DISPLAY[name]},
+        )
 
 
 __all__ = [

@@ -45,6 +45,7 @@ from torch import Tensor
 
 from mocap.hooks import hookimpl
 from mocap.interfaces import Imitator, Simulator, Trainer
+from mocap.metric_display import MetricInfo
 from mocap.motion.library import MotionLibrary
 from mocap.observations import SixD, proprioception
 from mocap.rotations import heading_quat, quat_apply, quat_conjugate
@@ -335,6 +336,16 @@ class GenerationEval(Trainer):
         return StageResult(checkpoint=None, metrics=numeric)
 
 
+#: the generation protocol's metrics: name -> how reports show it (declared with the trainer below)
+GENERATION_METRICS: dict[str, MetricInfo] = {
+    "fall_rate": MetricInfo("fall rate"),
+    "time_to_fall_s": MetricInfo("time to fall", "s"),
+    "survival_s": MetricInfo("survival time", "s"),
+    "diversity_m": MetricInfo("diversity", "m"),
+    "match_distance": MetricInfo("motion-matching distance"),
+    "filtered": MetricInfo("filtered share"),
+    "coverage": MetricInfo("clip coverage"),
+}
 GENERATION_COLUMNS = (
     ("fall_rate", "share"),
     ("time_to_fall_s", "s"),
@@ -369,6 +380,7 @@ def register_trainers(register):  # type: ignore[no-untyped-def]
         GenerationEval,
         params=GenerationParams,
         description="random generation from a trained latent space's prior: falls, diversity, motion matching, video",
+        metrics=GENERATION_METRICS,
     )
 
 

@@ -14,11 +14,16 @@ hooks below, and published under the entry-point group ``mocap``::
 called with the validated ``params`` model instance (or with no argument when ``params`` is None)
 plus the keyword arguments the role documents (see :mod:`mocap.interfaces`). ``params`` is a
 pydantic model that validates the component's ``params:`` section of a spec.
+
+``metrics={"speed_error": MetricInfo("speed error", "m/s")}`` (keyword; ``(display, unit)`` tuples
+are accepted) declares how the metrics the component reports are shown in ``report.md``,
+comparison tables and the end-of-run summary (:mod:`mocap.metric_display`); an undeclared metric is
+shown by its key.
 """
 
 from __future__ import annotations
 
-from typing import Any, Callable, Protocol
+from typing import Any, Callable, Mapping, Protocol
 
 import pluggy
 
@@ -30,7 +35,15 @@ hookimpl = pluggy.HookimplMarker(PROJECT)
 
 
 class Register(Protocol):
-    def __call__(self, name: str, factory: Callable[..., Any], params: type | None = None, description: str = "") -> None: ...
+    def __call__(
+        self,
+        name: str,
+        factory: Callable[..., Any],
+        params: type | None = None,
+        description: str = "",
+        *,
+        metrics: Mapping[str, Any] | None = None,
+    ) -> None: ...
 
 
 @hookspec

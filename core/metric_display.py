@@ -2,8 +2,11 @@
 more than one.
 
 Metric keys in ``metrics.jsonl`` are paths (``eval/imitation/mpjpe_g``); the last component names
-the metric. :data:`METRIC_DISPLAY` maps it to ``(display name, unit)`` (units as the evaluation
-protocols report them: mm, mm/frame, degrees, s, m, m/s; an empty unit for rates and counts).
+the metric. The component that produces a metric declares how it is shown: ``register(...,
+metrics={"mpjpe_g": MetricInfo("MPJPE-g", "mm")})`` in its registration hook (a
+:class:`~mocap.interfaces.Metric` also carries ``display`` and ``unit``). :func:`declared_metrics`
+collects every component's declarations; :func:`metric_label` turns a key into ``"MPJPE-g (mm)"``,
+and a key nobody declared is shown as it is.
 
 Over several runs (seeds) a cell shows ``mean ± h (n)`` with ``h`` the half-width of the 95%
 confidence interval of the mean, ``t_{0.975, n-1} s / sqrt(n)`` (Student's t, ``s`` the sample
@@ -13,46 +16,65 @@ standard deviation, ddof 1); a single run shows its value alone (no ± 0, no n =
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Mapping
 
-#: metric name (last key component) -> (display name, unit)
-METRIC_DISPLAY: dict[str, tuple[str, str]] = {
-    "success_rate": ("success rate", ""),
-    "succeeded": ("clips tracked", ""),
-    "mpjpe_g": ("MPJPE-g", "mm"),
-    "mpjpe_g_succ": ("MPJPE-g (tracked)", "mm"),
-    "mpjpe_l": ("MPJPE-l", "mm"),
-    "mpjpe_l_succ": ("MPJPE-l (tracked)", "mm"),
-    "pa_mpjpe": ("PA-MPJPE", "mm"),
-    "vel_err": ("velocity error", "mm/frame"),
-    "acc_err": ("acceleration error", "mm/frame²"),
-    "rot_err": ("rotation error", "°"),
-    "tracked_s": ("tracked time", "s"),
-    "fall_rate": ("fall rate", ""),
-    "time_to_fall_s": ("time to fall", "s"),
-    "diversity_m": ("diversity", "m"),
-    "normalized_return": ("normalized return", ""),
-    "return": ("return", ""),
-    "length": ("episode length", "steps"),
-    "speed_error": ("speed error", "m/s"),
-    "distance_m": ("distance", "m"),
-}
+if TYPE_CHECKING:  # pragma: no cover
+    from mocap.plugins import PluginSet
+
+
+@dataclass(frozen=True)
+class MetricInfo:
+    """How a metric is shown: its display name and unit (``""`` for rates, shares and counts)."""
+
+    display: str
+    unit: str = ""
+
+    @classmethod
+    def coerce(cls, value: Any, key: str) -> "MetricInfo":
+        """``MetricInfo``, ``(display, unit)`` or ``display`` -> ``MetricInfo`` (else a ValueError naming ``key``)."""
+        if isinstance(value, MetricInfo):
+            return value
+        if isinstance(value, str) and value:
+            return cls(value)
+        if isinstance(value, tuple) and len(value) == 2 and all(isinstance(v, str) for v in value) and value[0]:
+            return cls(value[0], value[1])
+        raise ValueError(f"metric {key!r}: declare MetricInfo(display, unit), (display, unit) or a display name, got {value!r}")
+
+
+def declared_metrics(plugins: "PluginSet | None" = None) -> dict[str, MetricInfo]:
+    """Every registered component's metric declarations (``plugins``: the process-wide set when None);
+    the first declaration of a name wins (core registers first)."""
+    if plugins is None:
+        from mocap.plugins import get_plugins
+
+        plugins = get_plugins()
+    out: dict[str, MetricInfo] = {}
+    for kind in plugins.components:
+        for comp in plugins.components[kind].values():
+            for name, info in comp.metrics.items():
+                out.setdefault(name, info)
+    return out
+
 
 # two-sided 95% critical values of Student's t for 1..30 degrees of freedom
 _T975 = (12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160, 2.145, 2.131,
          2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048, 2.045, 2.042)  # fmt: skip
 
 
-def metric_label(key: str) -> str:
-    """``"MPJPE-g (mm)"`` for ``eval/imitation/mpjpe_g``; a known name with its unit, else the key
-    itself (the stage prefix kept where it tells two metrics apart: ``task/`` vs ``eval/``)."""
+def metric_label(key: str, declared: Mapping[str, MetricInfo] | None = None) -> str:
+    """``"MPJPE-g (mm)"`` for ``eval/imitation/mpjpe_g``; a declared name with its unit, else the key
+    itself (the stage prefix kept where it tells two metrics apart: ``task/`` vs ``eval/``).
+    ``declared``: :func:`declared_metrics` of the process-wide plugins when None."""
     parts = key.split("/")
     name = parts[-1]
-    if name not in METRIC_DISPLAY:
+    table = declared_metrics() if declared is None else declared
+    if name not in table:
         return key
-    display, unit = METRIC_DISPLAY[name]
+    info = table[name]
     group = parts[-2] if len(parts) >= 2 and parts[-2] not in ("eval", "episode") else ""
-    text = f"{group} {display}" if group else display
-    return f"{text} ({unit})" if unit else text
+    text = f"{group} {info.display}" if group else info.display
+    return f"{text} ({info.unit})" if info.unit else text
 
 
 def t_critical_95(dof: int) -> float:
@@ -81,4 +103,4 @@ def format_cell(mean: float, half: float | None, n: int) -> str:
     return f"{mean:.3g} ± {half:.2g} (n={n})"
 
 
-__all__ = ["METRIC_DISPLAY", "format_cell", "mean_ci95", "metric_label", "t_critical_95"]
+__all__ = ["MetricInfo", "declared_metrics", "format_cell", "mean_ci95", "metric_label", "t_critical_95"]

@@ -28,6 +28,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from torch import Tensor
 
 from mocap.interfaces import Metric
+from mocap.metric_display import MetricInfo
 from mocap.rotations import quat_angle_between
 from mocap.state import Trajectories
 
@@ -143,6 +144,19 @@ BUILTIN_METRICS = {
     "vel_err": ("mm/frame", velocity_error, "body velocity error per frame at the evaluation fps"),
     "acc_err": ("mm/frame^2", acceleration_error, "body acceleration error per frame^2 at the evaluation fps"),
     "rot_err": ("deg", rotation_error, "mean geodesic angle between simulated and reference body orientations"),
+}
+
+
+#: how reports show each built-in metric (declared with its registration)
+BUILTIN_DISPLAY: dict[str, MetricInfo] = {
+    "mpjpe_g": MetricInfo("MPJPE-g", "mm"),
+    "mpjpe_l": MetricInfo("MPJPE-l", "mm"),
+    "pa_mpjpe": MetricInfo("PA-MPJPE", "mm"),
+    "vel_err": MetricInfo("velocity error", "mm/frame"),
+    "acc_err": MetricInfo("acceleration error", "mm/frame²"),
+    "rot_err": MetricInfo("rotation error", "°"),
+    "success": MetricInfo("success rate"),
+    "success_linf": MetricInfo("success rate (max body)"),
 }
 
 

@@ -21,13 +21,14 @@ import threading
 from dataclasses import dataclass, field
 from importlib import metadata
 from types import ModuleType
-from typing import Any, Callable, Iterable
+from typing import Any, Callable, Iterable, Mapping
 
 import pluggy
 from pydantic import BaseModel
 
 from mocap import hooks
 from mocap.hooks import ENTRY_POINT_GROUP, REGISTRATION_HOOKS
+from mocap.metric_display import MetricInfo
 
 KINDS: tuple[str, ...] = tuple(REGISTRATION_HOOKS.values())
 
@@ -57,6 +58,8 @@ class Component:
     params: type[BaseModel] | None
     plugin: str
     description: str = ""
+    #: display name and unit of each metric this component reports (:mod:`mocap.metric_display`)
+    metrics: Mapping[str, MetricInfo] = field(default_factory=dict)
 
     def validate_params(self, raw: dict[str, Any] | None) -> BaseModel | None:
         """Validate a spec's ``params`` mapping with this component's model (pydantic errors propagate)."""
@@ -238,6 +241,7 @@ def _collect(pset: PluginSet) -> None:
                 params: type[BaseModel] | None = None,
                 description: str = "",
                 *,
+                metrics: Mapping[str, Any] | None = None,
                 _kind: str = kind,
                 _plugin: str = impl.plugin_name,
                 _out: list[Component] = registered,
@@ -246,7 +250,10 @@ def _collect(pset: PluginSet) -> None:
                     raise ValueError(f"{_kind} name must be a non-empty string, got {name!r}")
                 if params is not None and not (isinstance(params, type) and issubclass(params, BaseModel)):
                     raise TypeError(f"params of {_kind} {name!r} must be a pydantic model class")
-                _out.append(Component(_kind, name, factory, params, _plugin, description))
+                if metrics is not None and not isinstance(metrics, Mapping):
+                    raise TypeError(f"metrics of {_kind} {name!r} must map metric names to MetricInfo(display, unit)")
+                infos = {str(k): MetricInfo.coerce(v, str(k)) for k, v in (metrics or {}).items()}
+                _out.append(Component(_kind, name, factory, params, _plugin, description, infos))
 
             try:
                 impl.function(register=register)

@@ -126,3 +126,25 @@ def test_entry_point_that_fails_to_import_is_reported_in_one_line(monkeypatch):
     line = failure.line()
     assert "\n" not in line and "broken_dist" in line and "mocap_no_such_module_xyz" in line
     assert "amp" in pset.names("humanoid")  # the others keep working
+
+
+def test_components_declare_how_their_metrics_are_shown():
+    """``register(..., metrics=...)`` is how a plugin's metric gets a display name and unit in
+    reports; a malformed declaration fails the plugin in one line, and undeclared keys show as keys."""
+    from mocap.metric_display import MetricInfo, declared_metrics, metric_label
+
+    def tasks(register):
+        register("jumpy", ToyComponent, metrics={"jump_height": MetricInfo("jump height", "m"), "hops": ("hops", "")})
+
+    pset = load_plugins([("jumpy", _module("jumpy", register_tasks=tasks))], entry_points=False)
+    assert pset.failures == []
+    declared = declared_metrics(pset)
+    assert declared["jump_height"] == MetricInfo("jump height", "m") and declared["hops"] == MetricInfo("hops")
+    assert metric_label("task/episode/jump_height", declared) == "jump height (m)"
+    assert metric_label("eval/hops", declared) == "hops"
+    assert metric_label("eval/undeclared_thing", declared) == "eval/undeclared_thing"
+    bad = _module("badmetrics", register_tasks=lambda register: register("t", ToyComponent, metrics={"x": 3}))
+    failed = load_plugins([("badmetrics", bad)], entry_points=False)
+    assert failed.failures and "metric 'x'" in failed.failures[0].error
+    builtin = declared_metrics(load_plugins())
+    assert builtin["mpjpe_g"] == MetricInfo("MPJPE-g", "mm") and builtin["speed_error"] == MetricInfo("speed error", "m/s")

@@ -3,7 +3,17 @@
 from __future__ import annotations
 
 from mocap.hooks import hookimpl
+from mocap.metric_display import MetricInfo
 from mocap.rl.ppo import PPOParams, PPOTrainer
+
+
+#: the episode statistics PPO logs under ``episode/`` (the env's episode dict; tasks add their own)
+EPISODE_METRICS = {
+    "return": MetricInfo("return"),
+    "length": MetricInfo("episode length", "steps"),
+    "normalized_return": MetricInfo("normalized return"),
+    "success": MetricInfo("success rate"),
+}
 
 
 @hookimpl
@@ -13,4 +23,5 @@ def register_trainers(register):
         PPOTrainer,
         params=PPOParams,
         description="PPO with GAE on the stage's VecEnv (make_env); checkpoints and resumes in the stage dir, writes policy.pt",
+        metrics=EPISODE_METRICS,
     )
