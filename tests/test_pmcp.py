@@ -458,3 +458,23 @@ def test_pmcp_getup_params_are_the_codes_phase_one():
     bad.component = trainer.component
     with pytest.raises(ValidationError):  # overrides are validated as the imitator's params
         bad._getup_params()
+
+
+def test_pmcp_phases_continue_one_discriminator(tmp_path):
+    """[P] §4.2 / [C]: with AMP on, the discriminator is fine-tuned across phases, not re-initialized:
+    the composer's discriminator has every update of the last primitive's plus its own."""
+    from mocap.testing import invoke
+
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(
+        SPEC.replace("energy_coef: 0.0}", "energy_coef: 0.0, amp: true, amp_hidden: [16], amp_batch: 8}", 1).replace("max_primitives: 2", "max_primitives: 1")
+    )
+    result = invoke(["run", spec, "--out", tmp_path / "runs" / "t"])
+    assert result.exit_code == 0, result.output
+    work = Path(json.loads((tmp_path / "runs" / "t" / "stages.json").read_text())[0]["checkpoint"]).parent
+    prim = load_checkpoint(work / "prim0" / "ppo.pt")
+    comp = load_checkpoint(work / "composer" / "ppo.pt")
+    prim_updates = prim["env"]["inner"]["amp"]["trainer"]["updates"]
+    comp_updates = comp["env"]["amp"]["trainer"]["updates"]
+    assert prim_updates > 0 and comp_updates > prim_updates, (prim_updates, comp_updates)
+    assert "discriminator continues from prim0" in result.output

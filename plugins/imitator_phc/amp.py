@@ -527,6 +527,18 @@ class DiscriminatorTrainer:
             "loss": self.cfg.loss,
         }
 
+    def carry_from(self, state: dict[str, Any]) -> None:
+        """Continue another phase's discriminator (PHC §4.2: the discriminator is not re-initialized
+        between primitives but fine-tuned on): its network, optimizer moments and update count from
+        ``state`` (a :meth:`state_dict`); this trainer keeps its own demo buffer (the clips of its own
+        phase), replay buffer and generator."""
+        if state.get("loss", self.cfg.loss) != self.cfg.loss:
+            raise ValueError(f"discriminator state was trained with loss {state['loss']!r}, this trainer uses {self.cfg.loss!r}")
+        self.disc.load_state_dict(state["disc"])
+        self.optimizer.load_state_dict(copy.deepcopy(state["optimizer"]))
+        self.updates = int(state["updates"])
+        self.disc.eval()
+
     def load_state_dict(self, state: dict[str, Any]) -> None:
         if state.get("loss", self.cfg.loss) != self.cfg.loss:
             raise ValueError(f"discriminator state was trained with loss {state['loss']!r}, this trainer uses {self.cfg.loss!r}")

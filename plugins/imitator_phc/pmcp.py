@@ -59,8 +59,11 @@ With ``recovery.getup`` set, P(F) first runs [C]'s AMP-only get-up phase (in ``p
 fallen starts only, task weight 0, AMP weight 1, initialized from the last imitation primitive) and
 the point-goal phase starts from its weights.
 
-Not implemented (see the digest): PNN lateral connections; carrying an AMP discriminator from one
-phase to the next (with ``amp`` on, each phase starts a new discriminator).
+With the imitator's ``amp`` on, each phase continues the previous phase's discriminator
+(``carry_discriminator``, [P] §4.2: the value function and discriminator are fine-tuned, not
+re-initialized); its demo windows come from the new phase's clips.
+
+Not implemented: PNN lateral connections.
 
 The code is split over sibling modules (re-exported here): the parameters in
 :mod:`mocap_phc.pmcp_params`, the composer and composite imitator in :mod:`mocap_phc.pmcp_composite`,
@@ -149,9 +152,7 @@ class PMCPTrainer(Trainer):
         def eval_sim(n: int) -> Any:
             return ctx.build("simulator", skeleton=sk, num_envs=n, seed=seed)
 
-        return ImitationEnv(
-            params if params is not None else self.component.params, sk, self._library(ids), sim, seed=seed, eval_simulator_factory=eval_sim
-        )
+        return ImitationEnv(params if params is not None else self.component.params, sk, self._library(ids), sim, seed=seed, eval_simulator_factory=eval_sim)
 
     def _recovery_params(self, fail_states: FailStateParams | None) -> Any:
         """The imitator's params with fallen/far starts and the point-goal reward while far (PHC Eq. 4)."""
@@ -210,9 +211,7 @@ class PMCPTrainer(Trainer):
         used = sum(int(prim.get("env_steps", 0)) for prim in state["primitives"])
         remaining = p.ppo.total_env_steps - used
         budget = remaining if p.primitive_env_steps is None else min(p.primitive_env_steps, remaining)
-        state["primitives"].append(
-            {"index": len(state["primitives"]), "clip_ids": ids, "budget_env_steps": int(budget), "status": "training"}
-        )
+        state["primitives"].append({"index": len(state["primitives"]), "clip_ids": ids, "budget_env_steps": int(budget), "status": "training"})
 
     def _primitive_budget_left(self, state: dict[str, Any]) -> int:
         used = sum(int(prim.get("env_steps", 0)) for prim in state["primitives"])
@@ -310,6 +309,21 @@ class PMCPTrainer(Trainer):
         self._save_state(state)
         ctx.console.print(f"pmcp: primitive 0 given ({source}): success {ev['success_rate']:.2f} on its {len(ids)} clip(s)")
 
+    def _carry_discriminator(self, env: Any, previous: Path, phase_dir: Path) -> None:
+        """A new phase's env continues the discriminator of the phase in ``previous`` (its ``ppo.pt``),
+        when ``carry_discriminator`` is on, both phases have one and this phase has not started yet
+        (a resumed phase restores its own from its ``ppo.pt``)."""
+        if not self.params.carry_discriminator or env.amp_trainer is None or (phase_dir / "ppo.pt").is_file():
+            return
+        source = previous / "ppo.pt"
+        if not source.is_file():
+            return
+        saved = load_checkpoint(source)["env"]
+        saved = saved.get("inner", saved)  # a primitive's env wraps the imitation env; the composer's does not
+        if "amp" in saved:
+            env.amp_trainer.carry_from(saved["amp"]["trainer"])
+            self.ctx.console.print(f"pmcp: the AMP discriminator continues from {previous.name}")
+
     def _getup_params(self) -> Any:
         """The imitator's params for [C]'s get-up phase: its fallen starts and imitator overrides."""
         rec = self.params.recovery
@@ -338,15 +352,19 @@ class PMCPTrainer(Trainer):
         patience, stop = (0, False) if recovery else (p.plateau_evals, p.stop_on_success)
         record = prim["getup"] if getup else prim
 
+        after_getup = recovery and not getup and prim.get("getup") is not None
+        previous = self.workdir / (f"prim{k}_getup" if after_getup else f"prim{k - 1}")
+
         def make_env(n: int) -> PrimitiveEnv:
-            env = PrimitiveEnv(self._imitation_env(ids, n, seed, env_params), p.eval_every, patience, stop)
+            inner = self._imitation_env(ids, n, seed, env_params)
+            self._carry_discriminator(inner, previous, phase_dir)
+            env = PrimitiveEnv(inner, p.eval_every, patience, stop)
             holder["env"] = env
             return env
 
         init = None
-        after_getup = recovery and not getup and prim.get("getup") is not None
         if after_getup or (k > 0 and p.init == "copy"):
-            source = load_policy(self.workdir / (f"prim{k}_getup" if after_getup else f"prim{k - 1}") / PRIMITIVE_NAME)
+            source = load_policy(previous / PRIMITIVE_NAME)
 
             def init(model: ActorCritic) -> None:
                 model.load_state_dict(source.state_dict())
@@ -445,8 +463,12 @@ class PMCPTrainer(Trainer):
 
         env_params = self._recovery_params(p.recovery.composer_fail_states) if p.recovery is not None else None
 
+        last = self.workdir / f"prim{int(state['primitives'][-1]['index'])}"
+
         def make_env(n: int) -> ComposerEnv:
-            return ComposerEnv(self._imitation_env(ids, n, seed, env_params), prims, p.composer_form, p.composer_eps)
+            inner = self._imitation_env(ids, n, seed, env_params)
+            self._carry_discriminator(inner, last, phase_dir)
+            return ComposerEnv(inner, prims, p.composer_form, p.composer_eps)
 
         log = _PhaseLog(ctx.log, "composer")
         sub = _PhaseContext(ctx, phase_dir, seed, make_env, log, lambda: False)

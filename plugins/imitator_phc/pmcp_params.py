@@ -130,6 +130,13 @@ class PMCPParams(BaseModel):
         "sharing, [C] forward_pmcp copies actors.k into actors.k+1, value function continued) or from a fresh random init "
         "('fresh'; [P] variant (a) adds PNN lateral connections, not implemented)",
     )
+    carry_discriminator: bool = Field(
+        True,
+        description="with the imitator's amp on: each phase (next primitive, P(F)'s get-up and point-goal phases, the "
+        "composer) continues the previous phase's AMP discriminator (network, optimizer, update count) instead of a new "
+        "one; its demo windows come from the new phase's clips ([P] §4.2 and [C]: the value function and the "
+        "discriminator are not re-initialized between primitives, only fine-tuned). False: a fresh discriminator per phase",
+    )
     composer_form: ComposerForm = Field(
         "multiplicative",
         description="how the composer's weights w mix the frozen primitives' means mu_i: 'multiplicative' = "
