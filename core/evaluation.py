@@ -17,7 +17,7 @@ import math
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any, Callable, Literal, Optional
+from typing import Annotated, Any, Callable, Literal, Optional, Sequence
 
 import torch
 import typer
@@ -44,6 +44,12 @@ class ImitationEvalParams(BaseModel):
         None, gt=0, description="seconds per episode for looping clips (None: one period of the clip)"
     )
     threshold: float = Field(0.5, gt=0, description="failure threshold on the mean body error, m")
+    success_exclude: list[str] = Field(
+        default_factory=list,
+        description="bodies left out of the success check (the mean body error against threshold); position errors "
+        "still use every body. [P] (UHC's definition): all body joints; [C] PHC's evaluation on smpl: its 20 'eval "
+        "bodies', i.e. [L_Toe, R_Toe, L_Hand, R_Hand] left out. Default: all bodies",
+    )
     video: bool = Field(True, description="record a video of one clip with the reference as a ghost")
     video_clip: str | None = Field(None, description="clip to record (default: the first clip)")
     video_seconds: float = Field(4.0, gt=0)
@@ -73,13 +79,16 @@ def rollout_imitation(
     recorder: Any = None,
     progress: Any = None,
     observed: MotionLibrary | None = None,
+    success_bodies: Sequence[int] | None = None,
 ) -> Rollout:
     """Roll ``imitator`` out in ``sim`` (N = len(clip_ids) envs) for ``frames`` (N,) control steps each.
 
     Frame 0 is the reset state; frame k the state after k steps, compared with the reference at
     time k * dt. ``observed``: a library of the same clips the policy sees instead of ``lib``
-    (noisy references, :mod:`mocap.noisy`); errors are still measured against ``lib``.
+    (noisy references, :mod:`mocap.noisy`); errors are still measured against ``lib``. An episode ends
+    once the mean error over ``success_bodies`` (all bodies when None) exceeds ``threshold``.
     """
+    check = slice(None) if success_bodies is None else list(success_bodies)
     n = len(clip_ids)
     dt = sim.dt
     zeros = torch.zeros(n, dtype=lib.dtype, device=lib.device)
@@ -108,7 +117,7 @@ def rollout_imitation(
         mask[k] = alive & (k <= frames)
         if state.unstable.numel():
             unstable |= state.unstable.cpu() & alive
-        err = torch.linalg.vector_norm(sp - rp, dim=-1).mean(-1)
+        err = torch.linalg.vector_norm(sp - rp, dim=-1)[..., check].mean(-1)
         alive = alive & (err <= threshold) & ~unstable
         if recorder is not None:
             recorder.add_frame(state, ghost=ref)
@@ -119,6 +128,22 @@ def rollout_imitation(
             sim_rot, ref_rot = sim_rot[: k + 1], ref_rot[: k + 1]
             break
     return Rollout(Trajectories(sim_pos, ref_pos, 1.0 / dt, mask, sim_rot, ref_rot), clip_ids, unstable)
+
+
+def success_bodies(skeleton: Any, exclude: Sequence[str]) -> list[int] | None:
+    """Indices of the bodies the success check uses: all but ``exclude`` (None: all bodies). An
+    unknown name is a :class:`~mocap.errors.UserError` listing the skeleton's bodies."""
+    if not exclude:
+        return None
+    from mocap.errors import UserError
+
+    unknown = [n for n in exclude if n not in skeleton.body_names]
+    if unknown:
+        raise UserError(f"success_exclude: {', '.join(unknown)} not a body of {skeleton.name!r}; bodies: {', '.join(skeleton.body_names)}")
+    keep = [i for i, n in enumerate(skeleton.body_names) if n not in set(exclude)]
+    if not keep:
+        raise UserError("success_exclude leaves no body to check")
+    return keep
 
 
 def episode_frames(lib: MotionLibrary, clip_ids: torch.Tensor, dt: float, horizon: float | None) -> torch.Tensor:
@@ -148,8 +173,9 @@ def evaluate_imitator(
     over the successful clips only — PHC reports MPJPE that way) and ``clips`` (clip name -> the
     metrics of that clip with ``success`` true/false and ``tracked_s``).
     """
-    metrics = metrics if metrics is not None else default_metrics()
     p = params
+    bodies = success_bodies(lib.skeleton, p.success_exclude)
+    metrics = metrics if metrics is not None else default_metrics(bodies, p.threshold)
     all_ids = torch.arange(lib.num_clips)
     per_episode: dict[str, list[torch.Tensor]] = {m.name: [] for m in metrics}
     lengths: list[torch.Tensor] = []
@@ -162,7 +188,7 @@ def evaluate_imitator(
             sim = make_sim(len(ids))
             dt = sim.dt
             frames = episode_frames(lib, ids, dt, p.horizon)
-            out = rollout_imitation(sim, lib, imitator, ids, frames, threshold=p.threshold, observed=observed)
+            out = rollout_imitation(sim, lib, imitator, ids, frames, threshold=p.threshold, observed=observed, success_bodies=bodies)
             sim.close()
             for m in metrics:
                 per_episode[m.name].append(m(out.traj).double())
@@ -232,12 +258,14 @@ class ImitationEval(Trainer):
         self.params = params
 
     def preflight(self, resolved: Any, plugins: Any) -> None:
-        """``video_clip`` names a clip of the spec's motion set (checked before any stage trains)."""
+        """``video_clip`` names a clip of the spec's motion set and ``success_exclude`` bodies of the
+        humanoid (checked before any stage trains)."""
         p = self.params
-        if not (p.video and p.video_clip):
-            return
         spec = resolved.spec
         skeleton = plugins.get("humanoid", spec.humanoid.name).build(resolved.params.get("humanoid"))
+        success_bodies(skeleton, p.success_exclude)
+        if not (p.video and p.video_clip):
+            return
         names = plugins.get("motion_source", spec.motions.name).build(resolved.params.get("motions")).load(skeleton).names
         if p.video_clip not in names:
             from mocap.errors import UserError

@@ -23,6 +23,8 @@ across different protocols.
 
 from __future__ import annotations
 
+from typing import Sequence
+
 import torch
 from pydantic import BaseModel, ConfigDict, Field
 from torch import Tensor
@@ -107,9 +109,14 @@ def rotation_error(tr: Trajectories) -> Tensor:
     return _masked_mean(angle, tr.valid())
 
 
-def success(tr: Trajectories, threshold: float = 0.5, grace_frames: int = 0, reduce: str = "mean") -> Tensor:
-    """(N,) 1.0 where the episode never exceeded ``threshold`` metres (mean or max over bodies)."""
+def success(
+    tr: Trajectories, threshold: float = 0.5, grace_frames: int = 0, reduce: str = "mean", bodies: Sequence[int] | None = None
+) -> Tensor:
+    """(N,) 1.0 where the episode never exceeded ``threshold`` metres (mean or max over bodies; over
+    the body indices ``bodies`` only when given, e.g. PHC's 20 evaluation bodies on smpl)."""
     err = torch.linalg.vector_norm(tr.sim - tr.ref, dim=-1)
+    if bodies is not None:
+        err = err[..., list(bodies)]
     per_frame = err.mean(-1) if reduce == "mean" else err.amax(-1)
     valid = tr.valid().clone()
     valid[:grace_frames] = False
@@ -132,9 +139,9 @@ class _FnMetric(Metric):
         return self._fn(tr, **self._kwargs)
 
 
-def _success_metric(params: SuccessParams, reduce: str) -> Metric:
+def _success_metric(params: SuccessParams, reduce: str, bodies: Sequence[int] | None = None) -> Metric:
     name = "success" if reduce == "mean" else "success_linf"
-    return _FnMetric(name, "fraction", success, threshold=params.threshold, grace_frames=params.grace_frames, reduce=reduce)
+    return _FnMetric(name, "fraction", success, threshold=params.threshold, grace_frames=params.grace_frames, reduce=reduce, bodies=bodies)
 
 
 BUILTIN_METRICS = {
@@ -165,5 +172,6 @@ def make_metric(name: str) -> Metric:
     return _FnMetric(name, unit, fn)
 
 
-def default_metrics() -> list[Metric]:
-    return [make_metric(n) for n in BUILTIN_METRICS] + [_success_metric(SuccessParams(), "mean")]
+def default_metrics(success_bodies: Sequence[int] | None = None, threshold: float = 0.5) -> list[Metric]:
+    """The built-in metrics plus ``success`` at ``threshold`` (over ``success_bodies`` when given)."""
+    return [make_metric(n) for n in BUILTIN_METRICS] + [_success_metric(SuccessParams(threshold=threshold), "mean", success_bodies)]
