@@ -150,6 +150,7 @@ def noisy_library(library: Any, level: NoiseLevel, seed: int, smooth: float = 1.
     return MotionLibrary(
         clips, library.skeleton, device=library.device, dtype=library.dtype,
         loop_heading=library.loop_heading, body_interp=library.body_interp,
+        velocities=library.velocities, velocity_sigma=library.velocity_sigma,
     )  # fmt: skip
 
 

@@ -34,12 +34,12 @@ from typing import Literal
 
 import numpy as np
 import torch
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import ConfigDict, Field
 
 from mocap.interfaces import MotionSource
 from mocap.motion.clip import Clip, MotionDataError
 from mocap.motion.deepmimic import y_up_to_z_up_pos
-from mocap.motion.sources import MotionSet, check_finite, expand_paths, load_each, resample
+from mocap.motion.sources import MotionSet, ReferenceVelocityParams, check_finite, expand_paths, load_each, resample
 from mocap.rotations import quat_conjugate, quat_from_rotvec, quat_mul, quat_normalize
 from mocap.skeleton import Skeleton
 
@@ -179,7 +179,7 @@ def load_amass_file(
     return clip.check(skeleton.num_bodies)
 
 
-class AmassParams(BaseModel):
+class AmassParams(ReferenceVelocityParams):
     """AMASS ``.npz`` files (the user's own copy) on the ``smpl`` humanoid."""
 
     model_config = ConfigDict(extra="forbid")
@@ -210,4 +210,4 @@ class AmassSource(MotionSource):
             skip_bad=p.skip_bad,
             where=p.paths,
             what="AMASS",
-        )
+        ).with_velocities(p)

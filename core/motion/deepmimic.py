@@ -32,11 +32,11 @@ import json
 from pathlib import Path
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import ConfigDict, Field, model_validator
 
 from mocap.interfaces import MotionSource
 from mocap.motion.clip import Clip, MotionDataError
-from mocap.motion.sources import MotionSet, check_finite, load_each, resample
+from mocap.motion.sources import MotionSet, ReferenceVelocityParams, check_finite, load_each, resample
 from mocap.skeleton import Skeleton
 
 #: The bundled clip names (file ``humanoid3d_<name>.txt``).
@@ -237,7 +237,7 @@ def load_deepmimic_file(path: str | Path, skeleton: Skeleton, name: str | None =
     return clip.check(skeleton.num_bodies)
 
 
-class DeepMimicParams(BaseModel):
+class DeepMimicParams(ReferenceVelocityParams):
     """DeepMimic clips (by default the 15 bundled with ``pybullet``)."""
 
     model_config = ConfigDict(extra="forbid")
@@ -307,4 +307,4 @@ class DeepMimicSource(MotionSource):
             lambda path, name: load_deepmimic_file(path, skeleton, name),
             skip_bad=self.params.skip_bad,
             what="DeepMimic",
-        )
+        ).with_velocities(self.params)

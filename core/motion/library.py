@@ -14,7 +14,10 @@ At construction every frame of every clip is converted once (float64 on the CPU,
   and DoFs, and :func:`~mocap.rotations.angular_velocity` ``(q[i], q[i+1], 1/fps)`` (world axes)
   for rotations. The last frame of a non-looping clip repeats the previous frame's velocity; the
   last frame of a looping clip is the next cycle's first frame, so it gets frame 0's velocity
-  (rotated by the cycle's heading change when ``loop_heading`` is on).
+  (rotated by the cycle's heading change when ``loop_heading`` is on). With ``velocities=
+  "central_smoothed"`` (the motion source's ``velocities`` param) they are PHC's code's instead:
+  central differences for positions and DoFs, and both these and the angular velocities smoothed
+  by a Gaussian of ``velocity_sigma`` frames within each clip (:mod:`mocap.motion.velocity`).
 
 :meth:`MotionLibrary.frames` evaluates clips at arbitrary times: with ``f = t * fps`` between
 frames ``i`` and ``i + 1``, root position, DoFs and all velocities are linearly interpolated, the
@@ -54,7 +57,8 @@ from torch import Tensor
 
 from mocap.kinematics import dofs_from_local_rotations, forward_kinematics, local_rotations_from_dofs
 from mocap.motion.clip import Clip, MotionDataError
-from mocap.motion.sources import MotionSet, check_clip_skeleton
+from mocap.motion.sources import MotionSet, VelocityMode, check_clip_skeleton
+from mocap.motion.velocity import central_differences, gaussian_smooth
 from mocap.rotations import angular_velocity, heading_angle, quat_mul, quat_slerp
 from mocap.skeleton import Skeleton
 from mocap.state import HUMANOID_FIELDS, MotionFrames
@@ -143,10 +147,18 @@ class MotionLibrary:
         dtype: torch.dtype = torch.float32,
         loop_heading: bool = False,
         body_interp: Literal["fk", "lerp"] = "fk",
+        velocities: VelocityMode | None = None,
+        velocity_sigma: float | None = None,
     ):
         if body_interp not in ("fk", "lerp"):
             raise ValueError(f"body_interp must be 'fk' or 'lerp', got {body_interp!r}")
         self.body_interp = body_interp
+        # the motion source's choice (MotionSet) unless given here
+        given = clips if isinstance(clips, MotionSet) else None
+        self.velocities: VelocityMode = velocities or (given.velocities if given is not None else "forward")
+        self.velocity_sigma = float(velocity_sigma or (given.velocity_sigma if given is not None else 2.0))
+        if self.velocities not in ("forward", "central_smoothed"):
+            raise ValueError(f"velocities must be 'forward' or 'central_smoothed', got {self.velocities!r}")
         clips = list(clips.clips if isinstance(clips, MotionSet) else clips)
         if not clips:
             raise MotionDataError("a motion library needs at least one clip")
@@ -238,9 +250,15 @@ class MotionLibrary:
         def ang(q: Tensor) -> Tensor:
             return angular_velocity(q, q[nxt], (1.0 / fr).reshape(-1, *([1] * (q.dim() - 2))))
 
-        body_lin_vel = finish(lin(body_pos), True)
-        body_ang_vel = finish(ang(body_rot), True)
-        dof_vel = finish(lin(dof), False)
+        if self.velocities == "central_smoothed":  # PHC's code (mocap.motion.velocity)
+            sigma = self.velocity_sigma
+            body_lin_vel = gaussian_smooth(central_differences(body_pos, starts, lengths, fps), starts, lengths, sigma)
+            body_ang_vel = gaussian_smooth(finish(ang(body_rot), True), starts, lengths, sigma)
+            dof_vel = gaussian_smooth(central_differences(dof, starts, lengths, fps), starts, lengths, sigma)
+        else:
+            body_lin_vel = finish(lin(body_pos), True)
+            body_ang_vel = finish(ang(body_rot), True)
+            dof_vel = finish(lin(dof), False)
 
         dev, dt = self.device, self.dtype
         self._lengths = lengths.to(dev)

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Iterable, Sequence
+from typing import Callable, Iterable, Literal, Sequence
 
 import numpy as np
 import torch
@@ -24,6 +24,23 @@ from mocap.interfaces import MotionSource
 from mocap.motion.clip import Clip, MotionDataError
 from mocap.rotations import quat_normalize, quat_slerp
 from mocap.skeleton import Skeleton
+
+
+VelocityMode = Literal["forward", "central_smoothed"]
+
+
+class ReferenceVelocityParams(BaseModel):
+    """How reference velocities are derived from a source's frames (every motion source's params)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    velocities: VelocityMode = Field(
+        "forward",
+        description="reference velocities: 'forward' differences (frame i: (x[i+1] - x[i]) fps) or 'central_smoothed', "
+        "central differences and a Gaussian of velocity_sigma frames within each clip (PHC's code: np.gradient then "
+        "gaussian_filter1d sigma 2, mode nearest; [P] §3.1 says only 'finite differences')",
+    )
+    velocity_sigma: float = Field(2.0, gt=0, le=100, description="frames; the Gaussian of 'central_smoothed' (PHC's code: 2)")
 
 
 @dataclass
@@ -37,6 +54,14 @@ class MotionSet:
 
     clips: list[Clip] = field(default_factory=list)
     skipped: list[tuple[str, str]] = field(default_factory=list)
+    #: how a motion library derives the clips' velocities (:class:`ReferenceVelocityParams`)
+    velocities: VelocityMode = "forward"
+    velocity_sigma: float = 2.0
+
+    def with_velocities(self, params: "ReferenceVelocityParams") -> "MotionSet":
+        """Record the source's velocity choice (returns ``self``)."""
+        self.velocities, self.velocity_sigma = params.velocities, float(params.velocity_sigma)
+        return self
 
     def __len__(self) -> int:
         return len(self.clips)
@@ -139,7 +164,7 @@ def check_clip_skeleton(clip: Clip, skeleton: Skeleton, where: str) -> None:
 
 
 # ------------------------------------------------------------------------------- native clips
-class NpzParams(BaseModel):
+class NpzParams(ReferenceVelocityParams):
     """Native ``.npz`` clip files (the format documented in :mod:`mocap.motion.clip`)."""
 
     model_config = ConfigDict(extra="forbid")
@@ -176,4 +201,4 @@ class NpzSource(MotionSource):
 
         return load_each(
             expand_paths(self.params.paths, ".npz"), one, skip_bad=self.params.skip_bad, what="native npz", where=self.params.paths
-        )
+        ).with_velocities(self.params)
