@@ -219,6 +219,38 @@ def test_amp_observation_dims(amp, smpl):
     assert s.dim == 13 + 6 * 23 + 69 + 12  # 232 (the code's 196 drops hands and toes)
 
 
+def test_amp_observation_without_hands_and_toes_is_the_codes_196(smpl):
+    """[C] build_amp_observations_smpl: 19 joints (no hands, no toes) and 4 key bodies = 196 per
+    frame; the kept columns are exactly those of the full observation."""
+    keys = ["R_Ankle", "L_Ankle", "R_Wrist", "L_Wrist"]
+    drop = ["L_Hand", "R_Hand", "L_Toe", "R_Toe"]
+    full, code = AMPObservation(smpl, key_bodies=keys), AMPObservation(smpl, key_bodies=keys, exclude=drop)
+    assert code.dim == 196 and code.joint_ids.numel() == 19 and code.dof_ids.numel() == 57
+    g = torch.Generator().manual_seed(0)
+    N, B, D = 3, smpl.num_bodies, smpl.num_dofs
+    rot = torch.randn(N, B, 4, generator=g, dtype=torch.float64)
+    s = HumanoidState(
+        root_pos=torch.randn(N, 3, generator=g, dtype=torch.float64),
+        root_rot=rot[:, 0] / rot[:, 0].norm(dim=-1, keepdim=True),
+        root_lin_vel=torch.randn(N, 3, generator=g, dtype=torch.float64),
+        root_ang_vel=torch.randn(N, 3, generator=g, dtype=torch.float64),
+        dof_pos=torch.randn(N, D, generator=g, dtype=torch.float64),
+        dof_vel=torch.randn(N, D, generator=g, dtype=torch.float64),
+        body_pos=torch.randn(N, B, 3, generator=g, dtype=torch.float64),
+        body_rot=rot / rot.norm(dim=-1, keepdim=True),
+        body_lin_vel=torch.randn(N, B, 3, generator=g, dtype=torch.float64),
+        body_ang_vel=torch.randn(N, B, 3, generator=g, dtype=torch.float64),
+    )
+    a, b = full(s), code(s)
+    kept_joints = [i for i, j in enumerate(full.joint_ids.tolist()) if j in set(code.joint_ids.tolist())]
+    joint_cols = [13 + 6 * i + k for i in kept_joints for k in range(6)]
+    vel_cols = [13 + 6 * 23 + d for d in code.dof_ids.tolist()]
+    key_cols = list(range(a.shape[1] - 12, a.shape[1]))
+    torch.testing.assert_close(b, a[:, list(range(13)) + joint_cols + vel_cols + key_cols])
+    with pytest.raises(KeyError, match="no body 'L_Paw'"):
+        AMPObservation(smpl, exclude=["L_Paw"])
+
+
 def test_history_push_order():
     h = AMPHistory(2, 3, 1)
     for v in (1.0, 2.0, 3.0, 4.0):

@@ -85,6 +85,8 @@ class AMPObservation:
         joints: ``"rot6d"`` (local rotations as 6-D) or ``"dof"`` (hinge angles).
         sixd: 6-D convention (``"tan_norm"`` as AMP and the PHC code).
         key_bodies: body names; None = ``skeleton.end_effectors``.
+        exclude: bodies whose joint features and DoF velocities are left out (PHC's code on smpl:
+            the hands and toes, 19 of 23 joints: 196 features per frame with its 4 key bodies).
     """
 
     def __init__(
@@ -93,6 +95,7 @@ class AMPObservation:
         joints: JointFeatures = "rot6d",
         sixd: SixD = "tan_norm",
         key_bodies: Sequence[str] | None = None,
+        exclude: Sequence[str] = (),
     ):
         if joints not in ("rot6d", "dof"):
             raise ValueError(f"unknown AMP joint features {joints!r}; choose 'rot6d' or 'dof'")
@@ -102,12 +105,15 @@ class AMPObservation:
         names = tuple(skeleton.end_effectors if key_bodies is None else key_bodies)
         self.key_bodies = names
         self.key_ids = torch.tensor([skeleton.body_index(n) for n in names], dtype=torch.long)
+        skipped = {skeleton.body_index(n) for n in exclude}  # KeyError naming the skeleton's bodies
         self.joint_ids = torch.tensor(
-            [i for i, b in enumerate(skeleton.bodies) if i > 0 and len(b.joint.hinges) > 0],
+            [i for i, b in enumerate(skeleton.bodies) if i > 0 and len(b.joint.hinges) > 0 and i not in skipped],
             dtype=torch.long,
         )
         self.parent_ids = torch.tensor([skeleton.bodies[int(i)].parent for i in self.joint_ids], dtype=torch.long)
-        D = skeleton.num_dofs
+        slices = skeleton.dof_slices
+        self.dof_ids = torch.tensor([d for i, sl in enumerate(slices) if i not in skipped for d in range(sl.start, sl.stop)], dtype=torch.long)
+        D = int(self.dof_ids.numel())
         joint_dim = 6 * int(self.joint_ids.numel()) if joints == "rot6d" else D
         self.dim = 1 + 6 + 3 + 3 + joint_dim + D + 3 * len(names)
 
@@ -125,10 +131,11 @@ class AMPObservation:
             parent = state.body_rot[:, self.parent_ids.to(dev)]
             joint = rotation_sixd(quat_mul(quat_conjugate(parent), child), self.sixd).reshape(N, -1)
         else:
-            joint = state.dof_pos
+            joint = state.dof_pos[:, self.dof_ids.to(state.dof_pos.device)]
+        dof_vel = state.dof_vel[:, self.dof_ids.to(state.dof_vel.device)]
         keys = state.body_pos[:, self.key_ids.to(state.body_pos.device)] - state.root_pos[:, None, :]
         keys = quat_apply(h_inv[:, None, :].expand(-1, keys.shape[1], -1), keys).reshape(N, -1)
-        out = torch.cat((root_h, root_rot, lin, ang, joint, state.dof_vel, keys), dim=-1).float()
+        out = torch.cat((root_h, root_rot, lin, ang, joint, dof_vel, keys), dim=-1).float()
         return torch.nan_to_num(out, nan=0.0, posinf=0.0, neginf=0.0)
 
 

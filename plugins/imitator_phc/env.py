@@ -171,7 +171,7 @@ class ImitationEnv(ClipMining):
         self.amp_history: AMPHistory | None = None
         self.amp_trainer: DiscriminatorTrainer | None = None
         if p.amp:
-            self.amp_obs = AMPObservation(skeleton, p.amp_joints, "tan_norm", p.amp_key_bodies)
+            self.amp_obs = AMPObservation(skeleton, p.amp_joints, "tan_norm", p.amp_key_bodies, p.amp_exclude)
             H = int(p.amp_history)
             self.amp_history = AMPHistory(N, H, self.amp_obs.dim)
             amp_obs, dt = self.amp_obs, self.dt

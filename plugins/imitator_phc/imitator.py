@@ -161,6 +161,12 @@ class PHCParams(BaseModel):
     amp_key_bodies: list[str] | None = Field(
         None, description="bodies whose root-relative positions enter the AMP observation; None: the skeleton's end effectors ([C] ankles + wrists)"
     )
+    amp_exclude: list[str] = Field(
+        default_factory=list,
+        description="bodies whose joint rotations and DoF velocities are left out of the AMP observation; [] keeps every "
+        "joint. [C] build_amp_observations_smpl drops the hands and toes: [L_Hand, R_Hand, L_Toe, R_Toe] with "
+        "amp_key_bodies [R_Ankle, L_Ankle, R_Wrist, L_Wrist] gives its 196 features per frame on smpl ([P] does not say)",
+    )
     amp_lr: float = Field(
         2e-5, gt=0.0, description="discriminator Adam learning rate ([C] it shares the policy optimizer, PHC+ lr 2e-5; small CPU runs want ~1e-4)"
     )
