@@ -1,9 +1,10 @@
 """Our :class:`~mocap.quantizers.ResidualVQ` vs ``vector_quantize_pytorch.ResidualVQ``
 at the same configuration, measured in one run.
 
-Configuration (Hybrid-RVQ paper, digest hybrid_rvq.md §3.5): N = 8 codebooks × K = 1024 codes,
-D = 32, EMA decay 0.99, dead-code threshold 2, k-means initialization (10 iterations) on the first
-batch, commitment weight 1, straight-through gradients (the reference's rotation trick off).
+Configuration (Hybrid-RVQ paper Sec. 4.2, Sec. 5.2 and Table 5: N = 8 codebooks × K = 1024 codes,
+commitment weight 1; our [DEFAULT] choices where the paper does not specify: D = 32, EMA decay 0.99,
+dead-code threshold 2, k-means initialization (10 iterations) on the first batch), straight-through
+gradients (the reference's rotation trick off).
 Quantizer dropout is off in both, so every step runs all N levels (a dropout depth drawn
 differently by the two libraries would make the timings incomparable).
 

@@ -2,7 +2,7 @@
 
 Works for any latent space implementing :class:`~mocap.interfaces.DistillableLatent` (PULSE,
 Hybrid-RVQ, a third-party one); the trainer knows nothing of their internals. PULSE's Alg. 1
-``TrainPULSE`` (digest pulse §4.3) is the reference:
+``TrainPULSE`` (PULSE Sec. 4.2 and App. C.1) is the reference:
 
 * **Teacher** = the ``imitator`` stage's trained component; **student** = the ``latent`` stage's
   component (an ``nn.Module``). Both see the teacher's observation :class:`~mocap.state.Observations`
@@ -30,7 +30,7 @@ Hybrid-RVQ, a third-party one); the trainer knows nothing of their internals. PU
   env columns (each keeping its T steps in time order, for temporal loss terms) minimize
   ``student.distill_losses(...)["loss"]`` with Adam and a global gradient-norm clip. ``progress``
   (env steps / budget, in [0, 1]) is passed for the latent's schedules.
-* **Hard negatives** (PHC+ soft mining, digest pulse §3.3): per-clip failure counts ``f`` and clip
+* **Hard negatives** (PHC+ soft mining, PULSE Sec. 4.1 / App. C.1): per-clip failure counts ``f`` and clip
   sampling probabilities ``(1 − floor) f / Σf + floor · b`` (``b``: the library's initial weights).
   ``f`` grows by each clip's failure rate over every ``update_every`` finished training episodes and
   by 1 for each clip failed in a periodic evaluation.

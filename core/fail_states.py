@@ -1,4 +1,4 @@
-"""Episode starts away from the reference, for learning to recover (PHC Sec. 3.4; PULSE's code
+"""Episode starts away from the reference, for learning to recover (PHC Sec. 3.2; PULSE's code
 uses them in distillation too): fallen states, far starts and "bonus" recovery episodes.
 
 Used by the PHC imitation env (:mod:`mocap_phc.env`) and by the distillation episodes
@@ -30,7 +30,8 @@ _FIELDS = HUMANOID_FIELDS
 
 
 class FailStateParams(BaseModel):
-    """Episode starts away from the reference (PHC §3.4 / digest phc §4.4), for recovery training."""
+    """Episode starts away from the reference (PHC Sec. 3.2 "Fail-state Recovery"; official code
+    phc/env/tasks/humanoid_im_getup.py), for recovery training."""
 
     model_config = ConfigDict(extra="forbid")
     fall_init_prob: float = Field(

@@ -1,7 +1,7 @@
 """Random generation from a latent space's prior, and its metrics (``mocap generate``, trainer ``generation_eval``).
 
-Neither PULSE nor the hybrid-RVQ paper defines one protocol (digest pulse §6.3: "only qualitative";
-hybrid_rvq §6.2: motion-matching distance, filtered share and coverage). This module measures both
+Neither PULSE nor the hybrid-RVQ paper defines one protocol (PULSE Sec. 5.3 and Fig. 3f: qualitative
+only; hybrid-RVQ Sec. 6.2, Eq. 8: motion-matching distance, filtered share and coverage). This module measures both
 kinds on the same rollouts:
 
 * **Rollouts.** ``num_rollouts`` envs start from reference states of the motion library (clip and

@@ -18,7 +18,7 @@ with weights ``(w_p, w_r, w_v, w_w) = (0.5, 0.3, 0.1, 0.1)`` and scales ``(k_p, 
 
 Energy penalty (``dof_force`` tau and ``dof_vel`` q-dot, per hinge):
 
-* ``"paper"`` (PHC Sec. 3.3, after Fu et al.): ``-c sum_j (tau_j w_j)^2``;
+* ``"paper"`` (PHC Sec. 3.1 "Reward", after Fu et al.): ``-c sum_j (tau_j w_j)^2``;
 * ``"code"`` (PHC ``power`` reward): ``-c sum_j |tau_j q-dot_j|`` (not squared), zero while the
   episode is at most ``warmup`` = 3 steps old (``progress_buf <= 3``).
 

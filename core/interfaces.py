@@ -43,7 +43,7 @@ class Box:
     """A continuous action space of ``shape`` with elementwise bounds (``inf`` for unbounded).
 
     ``exploration_sigma``: the exploration σ the space's method prescribes for a Gaussian policy on
-    it (PULSE Sec. 3.3: a fixed 0.22 on the prior residual), used by PPO when the spec leaves
+    it (PULSE Sec. 4.3: a fixed 0.22 on the prior residual), used by PPO when the spec leaves
     ``log_std_init`` unset; None: no prescription.
     """
 

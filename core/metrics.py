@@ -2,8 +2,8 @@
 
 Every metric takes a :class:`Trajectories` pair — simulated and reference body positions
 (T, N, B, 3) in metres, world frame, at ``fps`` — and returns a per-episode (N,) tensor. Frames
-where ``mask`` (T, N) is False (after an episode ended) are ignored. Definitions (anchors §15,
-PHC §6.2):
+where ``mask`` (T, N) is False (after an episode ended) are ignored. Definitions (PHC Sec. 4
+"Metrics", after UHC; the official code's ``compute_metrics_lite``, smpl_sim/smpllib/smpl_eval.py):
 
 * ``mpjpe_g``: mean over valid frames and bodies of ``||p_sim - p_ref||``, mm.
 * ``mpjpe_l``: the same after subtracting each pose's root (body 0) position, mm.

@@ -1,7 +1,7 @@
 """Observation builders shared by imitators and latent spaces: PHC's proprioception and imitation goals.
 
 Pure batched tensor functions for any skeleton (``B`` bodies, body 0 the root). Everything is
-expressed in the **heading frame** of the *simulated* root (PHC, Sec. 3.2: "normalized with
+expressed in the **heading frame** of the *simulated* root (PHC, Sec. 3.1: "normalized with
 respect to the humanoid's current facing direction and root position"): world vectors are rotated
 by ``h^-1`` where ``h = heading_quat(root_rot)`` is the root's yaw-only rotation, and positions
 are taken relative to the simulated root. Conventions (z up, wxyz) are those of :mod:`mocap.state`.

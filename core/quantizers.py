@@ -18,7 +18,8 @@ Residuals are formed from the (non-differentiable) codes, so ∂r_n/∂x = I.
 its forward value is exactly q (the added term is exactly zero) and its gradient w.r.t. ``x`` is
 the identity. Codebooks are buffers, not parameters: no gradient reaches them.
 
-**Commitment loss** ([DEFAULT], digest §3.5), mean-reduced over the batch and the dimensions:
+**Commitment loss** (Eq. 3's form, Sec. 3.3; per level or on the total is [DEFAULT], our choice: the
+paper does not specify), mean-reduced over the batch and the dimensions:
 
 * ``per_level`` (SoundStream/EnCodec style): Σ_i Σ_{n ≤ M_i} ‖r_{i,n-1} − sg(e_{i,n}*)‖² / (B·D)
   = Σ_i Σ_{n ≤ M_i} ‖r_{i,n}‖² / (B·D); its gradient w.r.t. x_i is 2/(B·D) · Σ_{n ≤ M_i} r_{i,n};

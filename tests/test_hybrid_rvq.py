@@ -1,4 +1,4 @@
-"""Properties of the Hybrid-RVQ latent space (digest hybrid_rvq.md §9.3): quantizers, the
+"""Properties of the Hybrid-RVQ latent space (paper Sec. 4.1-4.3, Alg. 1, Eqs. 5-6): quantizers, the
 Marginal Quantization composer, the loss terms and their stop-gradients, the task side, checkpoints."""
 
 from __future__ import annotations
@@ -105,7 +105,8 @@ def test_residual_norms_non_increasing_with_zero_code(args) -> None:  # type: ig
 
 
 def test_residual_norms_can_grow_without_zero_code() -> None:
-    """The unconditional version of the previous property is false (digest §9.3-3)."""
+    """The unconditional version of the previous property is false: Eq. 5's greedy residuals can grow
+    (our note; the paper states no such property)."""
     q = ResidualVQ(1, 2, 1).double().eval()
     q.levels[0].set_codebook(torch.tensor([[1.0]], dtype=torch.float64))
     q.levels[1].set_codebook(torch.tensor([[5.0]], dtype=torch.float64))
@@ -321,7 +322,7 @@ def _grad_norms(model: HybridLatent) -> dict[str, float]:
     return {"prior": norm(model.prior_net), "encoder": norm(model.posterior), "decoder": norm(model.decoder_net)}
 
 
-#: which networks each loss term trains (True) or must not reach (False) — digest §3.4
+#: which networks each loss term trains (True) or must not reach (False) — derived from Alg. 1 (Sec. 4.1) and Eq. 6 (Sec. 4.3.1)
 HYBRID_GRADIENTS = {
     "action": {"prior": False, "encoder": True, "decoder": True},
     "commit": {"prior": False, "encoder": True, "decoder": False},

@@ -84,7 +84,7 @@ def test_walk_heights_and_cycle(lib, amp):
     rows = slice(lib.frame_index(w, 0), lib.frame_index(w, 38) + 1)
     pelvis_z = lib.body_pos[rows, 0, 2]
     assert 0.84 <= float(pelvis_z.min()) and float(pelvis_z.max()) <= 0.88
-    # lowest corner of the foot boxes (FEASIBILITY: lowest foot point -5..+14 mm)
+    # lowest corner of the foot boxes (the standing design: lowest foot point -5..+14 mm)
     lows = []
     for foot in ("left_foot", "right_foot"):
         b = amp.body_index(foot)

@@ -1,4 +1,5 @@
-"""Property tests of :mod:`mocap.observations` (PHC digest §9.3: observation invariances, dimensions)."""
+"""Property tests of :mod:`mocap.observations` (PHC Sec. 3.1: heading-frame invariances;
+dimensions of the official code's ``compute_imitation_observations_v6``)."""
 
 from __future__ import annotations
 

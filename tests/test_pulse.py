@@ -1,4 +1,4 @@
-"""Tests of the ``pulse`` latent space: the math of Eq. 3 (property tests, digest pulse §10.3), the
+"""Tests of the ``pulse`` latent space: the math of Eq. 3 (property tests; PULSE Sec. 4.2, Eqs. 2-3), the
 networks, the task-side mapping (Eq. 4), the ablation switches, the registry and checkpoints."""
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """VMP stage I (plugin ``latent_vmp``): features, windows, standardization, the VAE's loss and
-schedules (design digest vmp.md section 9.4), a tiny training run on the bundled walk clip and
+schedules (VMP Sec. 3.1, Eqs. 2-4; Sec. 4.1 and Table 1), a tiny training run on the bundled walk clip and
 exact resume of the ``supervised`` trainer."""
 
 from __future__ import annotations

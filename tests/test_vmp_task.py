@@ -350,7 +350,7 @@ def test_task_state_round_trip_restores_the_history(amp, lib, vmp_file):
 
 
 def test_segment_labels_follow_the_papers_protocol():
-    """VMP Sec. 5.4: consecutive 2 s of codes form a class, the next 2 s are left out (issue 27 item 9)."""
+    """VMP Sec. 4.2: consecutive 2 s of codes form a class, the next 2 s are left out (issue 27 item 9)."""
     from mocap_vmp.metrics import segment_labels
 
     frame_clip = torch.cat((torch.zeros(150, dtype=torch.long), torch.ones(30, dtype=torch.long)))

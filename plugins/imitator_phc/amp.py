@@ -535,7 +535,7 @@ class DiscriminatorTrainer:
         }
 
     def carry_from(self, state: dict[str, Any]) -> None:
-        """Continue another phase's discriminator (PHC §4.2: the discriminator is not re-initialized
+        """Continue another phase's discriminator (PHC Sec. 3.2, Alg. 1: the discriminator is not re-initialized
         between primitives but fine-tuned on): its network, optimizer moments and update count from
         ``state`` (a :meth:`state_dict`); this trainer keeps its own demo buffer (the clips of its own
         phase), replay buffer and generator."""

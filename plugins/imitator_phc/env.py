@@ -1,7 +1,7 @@
 """The PHC imitation environment (a :class:`~mocap.rl.env.VecEnv`) and the observation/action code
 it shares with the trained imitator.
 
-Episode (PHC Sec. 3, digest §3.2-3.6):
+Episode (PHC Sec. 3.1; official code phc/env/tasks/humanoid_im.py):
 
 * **Reference-state initialization** (RSI, DeepMimic): a clip drawn with the motion library's
   sampling weights, a start time uniform in the clip (non-looping clips: in
@@ -19,7 +19,8 @@ Episode (PHC Sec. 3, digest §3.2-3.6):
 * ``episodes`` statistics per finished env: ``return``, ``length`` (steps) and ``success`` (1 if
   it was truncated, i.e. reached the time limit or the clip's end without terminating).
 
-**Hard-negative mining** (PHC+ "soft" mining; digest pulse §3.3 and phc §4.1), when
+**Hard-negative mining** (PHC+ "soft" mining; PULSE Sec. 4.1, PHC Sec. 3.1 "Hard Negative Mining", PHC
+code ``update_soft_sampling_weight`` in phc/utils/motion_lib_base.py), when
 ``params.hard_negative``: each clip ``c`` has a failure count ``f_c`` (PHC's
 ``termination_history``) and the clip sampling probabilities become::
 

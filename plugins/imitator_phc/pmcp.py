@@ -1,4 +1,4 @@
-"""PMCP (PHC Sec. 4, digest phc §4): progressive primitives and their composer, as one trainer ``pmcp``.
+"""PMCP (PHC Sec. 3.2, Alg. 1): progressive primitives and their composer, as one trainer ``pmcp``.
 
 The trainer runs, inside one ``imitator`` stage, what PHC's official code does by hand (train,
 ``forward_pmcp.py``, train again, then the composer config):
@@ -47,7 +47,7 @@ weights, its observation normalizer), the composer, the composer form and the cl
 with that file returns a :class:`CompositeImitator`, so ``mocap eval pmcp.pt`` works unchanged. A
 per-clip report ``pmcp.md`` is published to the run directory.
 
-**Recovery** (``recovery:``, PHC §4.4 / §4.6): after the imitation primitives, the fail-state
+**Recovery** (``recovery:``, PHC Sec. 3.2 "Fail-state Recovery"): after the imitation primitives, the fail-state
 primitive P(F) is trained (phase ``recovery``) on the locomotion and get-up clips, initialized from
 the last imitation primitive, with fallen and far starts, bonus recovery episodes and the
 point-goal reward while far (PHC Eq. 4, ``RecoveryGoalParams.reward = "point"``); it is frozen at

@@ -29,9 +29,10 @@ def _getup_imitator_default() -> dict[str, Any]:
 
 
 class GetupPhaseParams(BaseModel):
-    """[C]'s first P(F) phase (``getup_schedule`` before ``getup_udpate_epoch``; digest phc §4.4): pure
-    AMP get-up learning from fallen states. The paper does not mention it; the official code runs
-    it for about 8e4 of its ~1e5 epochs before the point-goal phase."""
+    """[C]'s first P(F) phase (``getup_schedule`` before ``getup_udpate_epoch``; official code
+    phc/env/tasks/humanoid_im_getup.py ``update_getup_schedule``): pure AMP get-up learning from
+    fallen states. The paper does not mention it; the official code runs it for about 8e4 of its
+    ~1e5 epochs before the point-goal phase."""
 
     model_config = ConfigDict(extra="forbid")
 
@@ -50,7 +51,8 @@ class GetupPhaseParams(BaseModel):
 
 
 class RecoveryPhaseParams(BaseModel):
-    """The fail-state recovery primitive P(F) (PHC §4.4 / digest phc §4.4, §4.6)."""
+    """The fail-state recovery primitive P(F) (PHC Sec. 3.2 "Fail-state Recovery", Eqs. 3-4;
+    official code phc/env/tasks/humanoid_im_getup.py)."""
 
     model_config = ConfigDict(extra="forbid")
 

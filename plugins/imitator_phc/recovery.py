@@ -1,4 +1,4 @@
-"""PHC's fail-state recovery goal (digest phc §4.4): far from the reference, imitate only its root.
+"""PHC's fail-state recovery goal (PHC Sec. 3.2, Eq. 3): far from the reference, imitate only its root.
 
 When the simulated root is farther than ``close_distance`` from the reference root, the imitation
 goal is computed on a *masked* reference in which everything but the root is replaced by the

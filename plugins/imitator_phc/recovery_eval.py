@@ -1,4 +1,4 @@
-"""Recovery rate (PHC §4.4 / digest phc §1 item 5): from fallen (and far) states back to the reference.
+"""Recovery rate (PHC Sec. 4.2, Table 4): from fallen (and far) states back to the reference.
 
 Protocol ``mocap-recovery-v2``, for any imitator ``mocap eval`` accepts (a PHC policy, a PMCP
 composite, a latent space's decoder):

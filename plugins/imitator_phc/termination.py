@@ -3,7 +3,7 @@
 Distances are global (world frame) between each simulated body and the reference body at the
 same time, over the *checked* bodies: every body except the excluded ones (ankles and toes for
 SMPL; by default the skeleton's ``feet``, which are the ankles and toes of ``smpl`` and the feet of
-``amp``). PHC Sec. 3.4 "Relaxed Early Termination": the feet are still rewarded, only not checked.
+``amp``). PHC Sec. 3.1 "Relaxed Early Termination": the feet are still rewarded, only not checked.
 
 * ``"paper"``: terminate when the **mean** distance over the checked bodies exceeds ``threshold``
   (0.5 m, following UHC);

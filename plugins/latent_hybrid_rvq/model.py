@@ -41,7 +41,7 @@ The previous-step values are detached caches [DEFAULT], and L_reg skips pairs th
 episode start (and the first step of each chunk, which has no predecessor in the chunk). All terms
 are mean-reduced over samples and latent/action dimensions [DEFAULT].
 
-**Baselines** (switch ``variant``, digest §3.9):
+**Baselines** (switch ``variant``; Hybrid-RVQ Sec. 5.2, App. A.1, Table 5):
 
 ==================  =====================================================  ============================
 variant             latent                                                 losses

@@ -1,4 +1,4 @@
-"""PULSE: parameters, networks and the latent space (digest pulse §4).
+"""PULSE: parameters, networks and the latent space (PULSE Sec. 4.2-4.3, Eqs. 1-4).
 
 Three diagonal-Gaussian / deterministic MLPs (Eq. 1):
 

@@ -1,6 +1,6 @@
 """The math of PULSE's objective (Eq. 3) as small pure tensor functions.
 
-``L = L_action + α L_regu + β L_KL`` with, per sample (digest pulse §4.2):
+``L = L_action + α L_regu + β L_KL`` with, per sample (PULSE Sec. 4.2):
 
 * ``L_action``: the distance between the student's decoder action and the teacher's;
 * ``L_regu``: a temporal smoothness term on consecutive encoder means, never across an episode start;
@@ -34,7 +34,7 @@ def gaussian_kl(mu_q: Tensor, logvar_q: Tensor, mu_p: Tensor, logvar_p: Tensor) 
 
         ½ Σ_i [ ℓ_p − ℓ_q + e^{ℓ_q − ℓ_p} + (μ_q − μ_p)² / e^{ℓ_p} − 1 ]
 
-    (the closed form the paper's Eq. 2 implies; digest §4.2). Shape: the inputs' batch shape.
+    (the closed form the paper's Eq. 2 implies, Sec. 4.2; the paper does not print it). Shape: the inputs' batch shape.
     Gradients flow into both distributions (no stop-gradient, as in the official code).
     """
     return 0.5 * (logvar_p - logvar_q + torch.exp(logvar_q - logvar_p) + (mu_q - mu_p).square() * torch.exp(-logvar_p) - 1.0).sum(-1)

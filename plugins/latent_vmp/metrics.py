@@ -11,7 +11,7 @@ joint's gimbal singularity (middle hinge at +-90 deg) the Euler decomposition is
 such poses are rare in human motion. :func:`joint_mae_deg_from_dofs` is the plain formula on DoF
 trajectories.
 
-Latent-space metrics (VMP Sec. 5.4 compares VMP's and CALM's latent spaces: LDA accuracy 0.854 vs
+Latent-space metrics (VMP Sec. 4.2 compares VMP's and CALM's latent spaces: LDA accuracy 0.854 vs
 0.687, MI 0.341 vs 0.121). The paper's protocol, the default here (``labels="segments"``,
 :func:`segment_labels`): the whole dataset is encoded, consecutive 2 s of latent codes form one
 class and the following 2 s are left out "to ensure distinct classes"; for mutual information

@@ -1,7 +1,7 @@
 """VMP stage II: the latent-conditioned tracking policy's environment, reward, termination and imitator.
 
-Tags: [P] the paper (digest vmp.md), [T1] its Table 1, [D] our decision where the paper is silent
-(digest section 9.5), [C] none (the paper has no public code).
+Tags: [P] the paper (VMP, Serifi et al. 2024, Sec. 3.2 and 4.1), [T1] its Table 1, [D] our decision where
+the paper is silent (our choice; the paper does not specify), [C] none (the paper has no public code).
 
 **Time convention** [D] (the one of the project's imitation protocol, :mod:`mocap.evaluation`): the
 observation built before a control step holds the reference frame ``m_t`` *of the time that step

@@ -1,10 +1,10 @@
-"""VMP's motion beta-VAE (paper sections 3.3-3.5): 1-D convolutions over time, loss, schedules.
+"""VMP's motion beta-VAE (paper Sec. 3.1, Sec. 4.1 "VAE", Table 1): 1-D convolutions over time, loss, schedules.
 
 Architecture. The paper gives: 1-D conv layers, 4 conv-ResNet blocks without biases (Jukebox
 style), LayerNorm, ReLU, a final linear layer to ``2 d_z`` (mean and, our choice, log-variance),
 ``d_z = 64``, a decoder that mirrors the encoder with transposed convolutions, about 0.8 M
 parameters. Widths, kernels, strides, dilations and where LayerNorm sits are not given; ours
-(design digest vmp.md section 3.3, an [X] reference design)::
+(our choice, an [X] reference design sized to Table 1's 0.8 M parameters)::
 
     encoder: Conv1d(F->C, k3, no bias) -> ReLU -> D x [Conv1d(C->C, k4, s2, p1, no bias) -> ReLU]
              -> B x ResBlock(C, dilation 3^i) -> flatten -> Linear(C*T' -> 2 d_z)

@@ -9,7 +9,7 @@ With ``MujocoParams.actuator_model`` set, the simulator replaces MuJoCo's ``posi
     Eq. 10  tau_friction = mu_s tanh(qd / qd_s) + mu_d qd
     Eq. 11  tau          = clamp(tau_motor; qd) - tau_friction
 
-``clamp`` is the torque-speed envelope (digest section 2.2): the limit is ``tau_max`` for braking
+``clamp`` is the torque-speed envelope (VMP Sec. 4.1 "Characters", Eq. 11): the limit is ``tau_max`` for braking
 and low speeds; in the driving direction above ``qd_tau_max`` it falls linearly and reaches 0 at
 ``qd_max`` (and stays 0 beyond, [X] the paper does not say)::
 

@@ -1,7 +1,6 @@
 """The ``generation`` task: unconditional motion generation from a latent space's prior, run as a
 task so that the same env, specs and comparison tables hold it next to the goal-directed tasks
-(PULSE Sec. 4.3 "random generation", digest pulse §4.4 / §6.3; hybrid-RVQ Sec. 6.2, digest
-hybrid_rvq §4.5).
+(PULSE Sec. 4.3 "random generation" and Sec. 5.3; hybrid-RVQ Sec. 6.2).
 
 Action. There is no task policy: :attr:`GenerationTask.prior_rollout` tells the task env
 (:class:`mocap.hierarchy.TaskEnv`) to ignore the policy's action and decode, every control step,

@@ -1,4 +1,4 @@
-"""The ``inbetween`` task (hybrid-RVQ paper Sec. 6.3.1 / App. C.1, digest hybrid_rvq §4.2): reach
+"""The ``inbetween`` task (hybrid-RVQ paper Sec. 6.3.1 / App. C.1, Eqs. 12-14): reach
 keyframes from the motion library at irregular intervals.
 
 Episode. A ``sequence_steps``-long window of a library clip ([P] 4 s = 120 control steps): the env

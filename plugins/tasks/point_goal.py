@@ -1,4 +1,4 @@
-"""The ``point_goal`` task (hybrid-RVQ paper Sec. 6.3.3 / App. C.3, digest hybrid_rvq §4.4): walk to a
+"""The ``point_goal`` task (hybrid-RVQ paper Sec. 6.3.3 / App. C.3, Eqs. 15-16): walk to a
 point on the ground.
 
 Goal. A 2-D target ``t`` (world xy) drawn uniformly in the disc of radius ``radius`` ([P] 10 m)
@@ -17,9 +17,9 @@ Reward ([P] Eq. 16)::
 with ``w_pos, w_speed = 0.7, 0.3``, ``pos_scale`` 0.5, ``u`` 1 m/s, ``v_xy`` the root's ground
 velocity and ``d`` a unit direction (``direction`` switch): ``"toward_target"`` (default) ``d = (t -
 p) / ||t - p||``; ``"paper"`` ``d = (p - t) / ||p - t||`` as printed, which points *away* from the
-target and rewards walking away (digest erratum). "Once the agent arrives at the goal, we give the
-maximum value for the reward": ``r = 1`` within ``arrive_radius`` ([DEFAULT] 0.5 m, unspecified in
-the paper). ``r`` is in (0, 1]: ``max_reward`` 1.
+target and rewards walking away (a sign slip in Eq. 16; the correction is ours). "Once the agent
+arrives at the goal, we give the maximum value for the reward": ``r = 1`` within ``arrive_radius``
+([DEFAULT] 0.5 m, unspecified in the paper). ``r`` is in (0, 1]: ``max_reward`` 1.
 
 Termination (``termination``): ``"paper"`` the head lower than ``head_height`` ([P] 0.5 m above the
 ground); ``"fall"`` the shared fall test (:class:`~mocap_tasks.common.FallParams`); ``"both"``.
@@ -80,7 +80,7 @@ class PointGoalParams(BaseModel):
     target_speed: float = Field(1.0, ge=0.0, description="u in r_speed = exp(-max(0, u - <v, d>)^2), m/s ([P] 1)")
     direction: Literal["toward_target", "paper"] = Field(
         "toward_target",
-        description="d in r_speed: 'toward_target' = (t - p) / ||t - p|| (digest erratum fix); 'paper' = (p - t) / ||p - t|| "
+        description="d in r_speed: 'toward_target' = (t - p) / ||t - p|| (our fix of Eq. 16's sign); 'paper' = (p - t) / ||p - t|| "
         "as printed, pointing away from the target",
     )
     arrive_radius: float = Field(

@@ -1,4 +1,4 @@
-"""The ``terrain`` task (PULSE Sec. 4.3 / App. C following PACER, digest pulse §5.1): follow a 2-D
+"""The ``terrain`` task (PULSE Sec. 4.3 / App. C.4, following PACER): follow a 2-D
 trajectory across procedurally generated terrain.
 
 Simulator. The task asks for a height-field ground through :attr:`TerrainTask.sim_overrides`

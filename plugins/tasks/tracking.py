@@ -30,22 +30,23 @@ all bodies, through :mod:`mocap.metrics` on one-frame :class:`~mocap.state.Traje
 * ``success``: fraction of the episodes that ended since the last call in which the humanoid
   *completed* the episode (no termination) **and** the mean error of the success bodies never
   exceeded ``success_threshold`` (0.5 m; :func:`mocap.metrics.success` per frame). Success bodies:
-  the 3 tracked points for VR ([P] "Succ is measured on the 3 tracked points only", digest pulse
-  §5.1/§6.2), the head for HMD, all bodies for motion tracking (PHC/PULSE). Completion matters when
-  the termination is stricter than the success criterion (the code's 0.25 m any-body rule);
+  the 3 tracked points for VR ([P] PULSE Sec. 5 "Metrics": "the success rate is measured against
+  only the three body points"), the head for HMD, all bodies for motion tracking (PHC/PULSE).
+  Completion matters when the termination is stricter than the success criterion (the code's 0.25 m
+  any-body rule);
 * ``episodes`` (a sum), ``reward`` (mean), ``steps`` (a sum).
 
 Normalized return: every reward is a weighted sum of kernels in (0, 1], so :attr:`max_reward` is
 the sum of the weights (1 with the defaults), reached exactly when the humanoid matches the
 reference frame.
 
-``vr_tracking`` (PULSE Sec. 5 / App. C, QuestSim; digest pulse §5.1 "VR controller tracking"):
+``vr_tracking`` (PULSE Sec. 5.2 / App. C.4 "VR Controller Tracking", after QuestSim):
 
 * goal ``s^g-vr`` = the imitation goal of :func:`mocap.observations.imitation_goal` restricted to
   the head and both hands: ``(theta^_{t+1} - theta_t, p^_{t+1} - p_t, v^_{t+1} - v_t,
   w^ - w_t, theta^_{t+1}, p^_{t+1})`` per point in the heading frame ([CODE] 3 x 24 = 72 dims;
   ``goal: keypoint`` gives positions and velocities only, 3 x 9 = 27);
-* reward: "the same **full-body** imitation reward as PHC+" (digest pulse §3.4, Eq. 5's
+* reward: "the same (full-body) imitation reward" (PULSE App. C.4; App. B.2, Eq. 5's
   ``r^g-imitation``): ``sum_i w_i exp(-k_i e_i)`` over position, rotation, linear and angular
   velocity, weights (0.5, 0.3, 0.1, 0.1), scales (100, 10, 0.1, 0.1); switch ``reward_form``:
   [P] ``e`` a norm (mean over bodies of the per-body norm / angle) or [CODE] the mean of squared
@@ -56,20 +57,21 @@ reference frame.
   (mean of the 3 point errors > 0.5 m);
 * episode 300 steps (10 s, [CODE]).
 
-``hmd_tracking`` (Hybrid-RVQ Sec. 6.3.2 / App. C.2; digest hybrid_rvq §4.3):
+``hmd_tracking`` (Hybrid-RVQ Sec. 6.3.2 / App. C.2):
 
 * goal: the head part of the target ``s~`` (Eq. 9), **current minus reference** as printed, for the
   reference frames ``t + 1 .. t + frames`` ([P] the next target and 4 more, ``frames`` = 5), each
   ``[h^-1 (p_h - p~_h) (3) | h^-1 (v_h - v~_h) (3) | q(h^-1 (theta_h theta~_h^-1) h) (4, w >= 0)
   | h^-1 (w_h - w~_h) (3)]`` = 13 dims, 65 in all; all against the current simulated head and in
-  the heading frame ([DEFAULT] of the digest: the paper states neither);
-* reward: [P] "the in-betweening reward structure, head part only" (no formula); [DEFAULT] of the
-  digest ``0.4 exp(-40 |dp|^2) + 0.3 exp(-2 angle^2) + 0.15 exp(-0.5 |dv|^2) + 0.15 exp(-0.1 |dw|^2)``
+  the heading frame ([DEFAULT], our choice: the paper states neither);
+* reward: [P] "a similar reward structure used for motion in-betweening", "only the head part"
+  (App. C.2, no formula); [DEFAULT], our choice:
+  ``0.4 exp(-40 |dp|^2) + 0.3 exp(-2 angle^2) + 0.15 exp(-0.5 |dv|^2) + 0.15 exp(-0.1 |dw|^2)``
   with Eq. 10's kernels; weights and scales are parameters;
 * termination: [P] head farther than 1 m from the reference head;
 * episode 150 steps (5 s, [P]).
 
-``motion_tracking`` (full-body imitation through the latent space; PHC, digest pulse §3):
+``motion_tracking`` (full-body imitation through the latent space; PHC Sec. 3.1, PULSE Sec. 4.1):
 
 * goal: the imitator's imitation goal :func:`mocap.observations.imitation_goal` (``goal: rot``
   24 B dims or ``keypoint`` 9 B) of all bodies at ``t + 1``;

@@ -16,7 +16,7 @@ from torch import Tensor
 #: PHC imitation reward: (position, rotation, linear velocity, angular velocity)
 PHC_WEIGHTS: tuple[float, float, float, float] = DEFAULT_WEIGHTS
 PHC_SCALES: tuple[float, float, float, float] = DEFAULT_SCALES
-#: Hybrid HMD head reward [DEFAULT of the digest]: (position, rotation, linear velocity, angular velocity)
+#: Hybrid HMD head reward ([DEFAULT], our choice: App. C.2 gives no formula): (position, rotation, linear velocity, angular velocity)
 HMD_WEIGHTS: tuple[float, float, float, float] = (0.4, 0.3, 0.15, 0.15)
 HMD_SCALES: tuple[float, float, float, float] = (40.0, 2.0, 0.5, 0.1)
 

@@ -83,7 +83,7 @@ class HmdTrackingParams(_TrackingParams):
     frames: int = Field(5, ge=1, description="reference frames observed, t+1 .. t+frames ([P] the next and 4 more)")
     reward_weights: tuple[float, float, float, float] = Field(
         HMD_WEIGHTS,
-        description="(position, rotation, velocity, angular velocity) weights; [P] gives none, [DEFAULT] of the digest",
+        description="(position, rotation, velocity, angular velocity) weights; [P] gives none (App. C.2); [DEFAULT], our choice",
     )
     reward_scales: tuple[float, float, float, float] = Field(
         HMD_SCALES, description="kernel scales k of exp(-k |d|^2) ([DEFAULT]: Eq. 10's 40, 2, 0.5, 0.1)"
