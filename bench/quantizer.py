@@ -24,17 +24,22 @@ Ratios within one run are comparable; absolute numbers from different runs or ma
 ``vector-quantize-pytorch`` is a benchmark-only dependency (``pip install vector-quantize-pytorch``);
 it is not a dependency of ``mocap``. Results go to ``bench/results/quantizer.json``.
 
-Usage: ``python bench/quantizer.py [--quick] [--sizes 256 1024 4096 16384] [--threads T] [--steps S]``
+``--relative 0.1 0.25`` adds arms of ours with ``dead_threshold_mode="relative"`` (the threshold a
+fraction of the mean use per code, batch / codebook size) on the same batches.
+
+Usage: ``python bench/quantizer.py [--quick] [--sizes 256 1024 4096 16384] [--threads T] [--steps S]
+[--dead-threshold 2] [--relative 0.1 0.25]``
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import statistics
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -59,13 +64,15 @@ def make_data(dim: int, seed: int, clusters: int = 256) -> Callable[[int], Tenso
     return sample
 
 
-def build_ours(cfg: dict[str, Any]) -> torch.nn.Module:
+def build_ours(cfg: dict[str, Any], relative: float | None = None) -> torch.nn.Module:
+    """Ours at the config's absolute dead-code threshold, or at ``relative`` x the mean use per code."""
     return ResidualVQ(
         cfg["dim"],
         cfg["num_quantizers"],
         cfg["codebook_size"],
         decay=cfg["decay"],
-        dead_threshold=cfg["dead_threshold"],
+        dead_threshold=cfg["dead_threshold"] if relative is None else relative,
+        dead_threshold_mode="absolute" if relative is None else "relative",
         init="kmeans",
         kmeans_iters=cfg["kmeans_iters"],
         dropout=False,
@@ -117,16 +124,21 @@ def evaluate(kind: str, model: torch.nn.Module, x: Tensor, codebook_size: int) -
     return {"relative_mse": rel_mse, "level1_code_usage": used}
 
 
-def run_size(cfg: dict[str, Any], batch: int, steps: int, warmup: int, heldout: Tensor, seed: int) -> dict[str, Any]:
+def run_size(
+    cfg: dict[str, Any], batch: int, steps: int, warmup: int, heldout: Tensor, seed: int, relative: Sequence[float] = ()
+) -> dict[str, Any]:
+    """One batch size: ours and the reference at the config's threshold (timed alternately), plus ours
+    at each ``relative`` threshold (arms ``ours_relative_<t>``, same batches)."""
     sample = make_data(cfg["dim"], seed)
     torch.manual_seed(seed)
     models = {"ours": build_ours(cfg), "reference": build_reference(cfg)}
-    stepper = {"ours": step_ours, "reference": step_reference}
-    times: dict[str, list[float]] = {"ours": [], "reference": []}
+    models.update({f"ours_relative_{t:g}": build_ours(cfg, t) for t in relative})
+    stepper = {k: step_reference if k == "reference" else step_ours for k in models}
+    times: dict[str, list[float]] = {k: [] for k in models}
     for i in range(warmup + steps):
         x = sample(batch)
         w = torch.randn_like(x)
-        order = ("ours", "reference") if i % 2 == 0 else ("reference", "ours")
+        order = list(models) if i % 2 == 0 else list(reversed(models))
         for kind in order:
             t0 = time.perf_counter()
             stepper[kind](models[kind], x, w)
@@ -134,14 +146,17 @@ def run_size(cfg: dict[str, Any], batch: int, steps: int, warmup: int, heldout: 
             if i >= warmup:
                 times[kind].append(elapsed * 1000.0)
     row: dict[str, Any] = {"batch": batch}
-    for kind in ("ours", "reference"):
+    for kind in models:
         row[kind] = {
             "median_ms": statistics.median(times[kind]),
             "best_ms": min(times[kind]),
-            **evaluate(kind, models[kind], heldout, cfg["codebook_size"]),
+            **evaluate("reference" if kind == "reference" else "ours", models[kind], heldout, cfg["codebook_size"]),
         }
+    ref_mse = max(row["reference"]["relative_mse"], 1e-30)
     row["time_ratio"] = row["ours"]["median_ms"] / row["reference"]["median_ms"]
-    row["error_ratio"] = row["ours"]["relative_mse"] / max(row["reference"]["relative_mse"], 1e-30)
+    row["error_ratio"] = row["ours"]["relative_mse"] / ref_mse
+    for t in relative:
+        row[f"error_ratio_relative_{t:g}"] = row[f"ours_relative_{t:g}"]["relative_mse"] / ref_mse
     return row
 
 
@@ -157,6 +172,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--heldout", type=int, default=None, help="held-out samples for the error (default 16384, --quick 1024)")
     ap.add_argument("--threads", type=int, default=None, help="torch threads (default: torch's default)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--dead-threshold", type=float, default=2.0, help="absolute dead-code threshold of both libraries (default 2)")
+    ap.add_argument(
+        "--relative", nargs="*", type=float, default=[], help="extra arms: ours with dead_threshold_mode relative at these fractions"
+    )
     ap.add_argument("--out", type=Path, default=None, help="output JSON (default bench/results/quantizer.json; --quick: quantizer_quick.json)")
     args = ap.parse_args(argv)
     if args.threads:
@@ -167,7 +186,7 @@ def main(argv: list[str] | None = None) -> int:
         "num_quantizers": args.num_quantizers or (2 if q else 8),
         "codebook_size": args.codebook_size or (64 if q else 1024),
         "decay": 0.99,
-        "dead_threshold": 2.0,
+        "dead_threshold": args.dead_threshold,
         "kmeans_iters": 10,
     }
     sizes = args.sizes or ([256] if q else [256, 1024, 4096, 16384])
@@ -176,10 +195,14 @@ def main(argv: list[str] | None = None) -> int:
     heldout = make_data(cfg["dim"], args.seed + 12345)(args.heldout or (1024 if q else 16384))
     out_path = args.out or (RESULTS.with_name("quantizer_quick.json") if q else RESULTS)
 
+    load_before = os.getloadavg()[0]
     rows = []
     for batch in sizes:
-        row = run_size(cfg, batch, steps, warmup, heldout, args.seed)
+        row = run_size(cfg, batch, steps, warmup, heldout, args.seed, args.relative)
         rows.append(row)
+        for t in args.relative:
+            r = row[f"ours_relative_{t:g}"]
+            print(f"B={batch:6d}  ours, relative threshold {t:g}: rel. MSE {r['relative_mse']:.4f} (usage {r['level1_code_usage']:.2f})", flush=True)
         print(
             f"B={batch:6d}  ours {row['ours']['median_ms']:8.2f} ms  ref {row['reference']['median_ms']:8.2f} ms  "
             f"ratio {row['time_ratio']:.2f}  |  rel. MSE ours {row['ours']['relative_mse']:.4f}  "
@@ -201,6 +224,9 @@ def main(argv: list[str] | None = None) -> int:
         "warmup": warmup,
         "heldout": int(heldout.shape[0]),
         "threads": torch.get_num_threads(),
+        "relative_thresholds": list(args.relative),
+        "load_avg_1m_before": load_before,
+        "load_avg_1m_after": os.getloadavg()[0],
         "machine": {"platform": platform.platform(), "processor": platform.processor(), "python": platform.python_version()},
         "versions": versions,
         "notes": "time_ratio = ours / reference (median ms of forward+backward training steps, same batches, "
