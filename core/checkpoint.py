@@ -74,6 +74,17 @@ def package_versions() -> dict[str, str]:
     return out
 
 
+def component_provenance() -> dict[str, dict[str, str]]:
+    """Which plugin package (and version) registered each component in this process
+    (:meth:`mocap.plugins.PluginSet.provenance`); empty when the plugins cannot be listed."""
+    from mocap.plugins import get_plugins
+
+    try:
+        return get_plugins().provenance()
+    except Exception:  # noqa: BLE001 - a record for error messages must never fail a save
+        return {}
+
+
 def hardware() -> dict[str, Any]:
     info: dict[str, Any] = {"cpu_count": os.cpu_count(), "machine": platform.machine()}
     if torch.cuda.is_available():  # pragma: no cover - no GPU in CI
@@ -152,6 +163,7 @@ def save_checkpoint(path: Path, payload: dict[str, Any], *, spec_yaml: str | Non
 
     payload = dict(payload)
     payload.setdefault("versions", package_versions())
+    payload.setdefault("components", component_provenance())
     if spec_yaml is not None:
         payload["spec"] = spec_yaml
     buffer = io.BytesIO()
@@ -333,6 +345,7 @@ __all__ = [
     "StorageError",
     "atomic_write_bytes",
     "atomic_write_json",
+    "component_provenance",
     "atomic_write_text",
     "check_format",
     "convert_checkpoint",

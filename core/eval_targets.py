@@ -83,7 +83,7 @@ def _from_file(target: Path, plugins: Any) -> EvalTarget:
     from mocap.runfiles import yaml_mapping
 
     doc = resolve_embedded_paths(yaml_mapping(spec_yaml, f"{target} (embedded spec)"), target.parent)
-    resolved = validate_document(doc, plugins, source=f"{target} (embedded spec)")
+    resolved = validate_document(doc, plugins, source=f"{target} (embedded spec)", provenance=data.get("components"))
     from mocap.distill import CHECKPOINT_FORMAT as DISTILL_FORMAT, LATENT_FORMAT
 
     if data.get("format") in (LATENT_FORMAT, DISTILL_FORMAT) or (resolved.spec.imitator is None and resolved.spec.latent is not None):

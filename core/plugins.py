@@ -48,6 +48,18 @@ class UnknownComponent(PluginError):
         super().__init__(f"unknown {kind} {name!r}; registered {kind}s: {listed}")
 
 
+def install_hint(kind: str, name: str, provenance: Any) -> str:
+    """``"; it was made with package 'mocap-foo' 1.2 (plugin 'foo'): install it"`` when a checkpoint's
+    recorded ``provenance`` (:meth:`PluginSet.provenance`) knows who registered ``kind`` ``name``, else ""."""
+    entry = provenance.get(f"{kind}:{name}") if isinstance(provenance, dict) else None
+    if not isinstance(entry, dict):
+        return ""
+    package, version, plugin = (str(entry.get(k) or "") for k in ("package", "version", "plugin"))
+    if not package or package.startswith("<local:"):
+        return f"; the file was made with plugin {plugin!r} (not an installed package): load that plugin" if plugin else ""
+    return f"; the file was made with {kind} {name!r} from package {package!r} {version}: install it (pip install {package})"
+
+
 @dataclass(frozen=True)
 class Component:
     """One registered component: ``factory`` builds it from a validated ``params`` instance."""
@@ -122,6 +134,21 @@ class PluginSet:
                     f"{k} {n!r} is registered by more than one plugin: {' and '.join(repr(o) for o in owners)}; "
                     f"uninstall one or block it with MOCAP_DISABLE_PLUGINS={owners[-1]}"
                 )
+
+    def provenance(self) -> dict[str, dict[str, str]]:
+        """``{"<kind>:<name>": {"plugin", "package", "version"}}`` of every registered component: what a
+        checkpoint records, so that a reader without the plugin learns which package to install."""
+        info = {p.name: p for p in self.plugins}
+        out: dict[str, dict[str, str]] = {}
+        for kind, comps in self.components.items():
+            for name, comp in comps.items():
+                owner = info.get(comp.plugin)
+                out[f"{kind}:{name}"] = {
+                    "plugin": comp.plugin,
+                    "package": owner.package if owner else "",
+                    "version": owner.version if owner else "",
+                }
+        return out
 
     def commands(self, app: Any) -> None:
         """Let every plugin add its CLI commands (failures are recorded, not raised)."""

@@ -29,7 +29,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from mocap.bounds import ThreadCount
-from mocap.plugins import PluginError, PluginSet, UnknownComponent
+from mocap.plugins import PluginError, PluginSet, UnknownComponent, install_hint
 
 SPEC_VERSION = 1
 
@@ -444,7 +444,7 @@ def resolve_relative_paths(model: BaseModel, base_dir: Path) -> BaseModel:
 
 
 def validate_document(
-    doc: dict[str, Any], plugins: PluginSet, source: str = "<spec>", base_dir: Path | None = None
+    doc: dict[str, Any], plugins: PluginSet, source: str = "<spec>", base_dir: Path | None = None, provenance: Any = None
 ) -> ResolvedSpec:
     """Validate a merged mapping against the structure and every component's params model.
 
@@ -462,7 +462,8 @@ def validate_document(
             comp = plugins.get(kind, ref.name)
         except UnknownComponent as exc:
             listed = ", ".join(exc.choices) or "(none registered)"
-            issues.append(SpecIssue(f"{path}.name", f"unknown {kind} {ref.name!r}; registered {kind}s: {listed}"))
+            hint = install_hint(kind, ref.name, provenance)
+            issues.append(SpecIssue(f"{path}.name", f"unknown {kind} {ref.name!r}; registered {kind}s: {listed}{hint}"))
             continue
         except PluginError as exc:
             issues.append(SpecIssue(f"{path}.name", str(exc)))

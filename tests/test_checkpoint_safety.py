@@ -154,3 +154,21 @@ def test_export_rewrites_the_copied_checkpoints_embedded_paths(tmp_path):
     text = "imitator:\n  name: phc\n  checkpoint: /abs/x/checkpoints/imitator/policy.pt\nlatent:\n  name: pulse\n"
     out = relative_spec_text(text, tmp_path / "dest", root_map=("/abs/x/", str(tmp_path) + "/"))
     assert "checkpoint: ../checkpoints/imitator/policy.pt" in out
+
+
+def test_a_checkpoint_names_the_package_of_a_missing_plugin(tmp_path, capsys):
+    """Checkpoints record which package registered each component; evaluating one whose imitator's
+    plugin is not installed says which package to install, in one line."""
+    from mocap.checkpoint import save_checkpoint
+
+    ck = load_checkpoint(Path(__file__).resolve().parents[1] / "checkpoints" / "imitator_amp_v3" / "policy.pt")
+    save_checkpoint(tmp_path / "mine.pt", {"format": ck["format"], "x": torch.zeros(1)})
+    recorded = load_checkpoint(tmp_path / "mine.pt")["components"]
+    assert recorded["imitator:phc"]["package"] == "mocap" and recorded["trainer:ppo"]["plugin"] == "rl"
+    foreign = dict(ck)
+    foreign["spec"] = ck["spec"].replace("name: phc", "name: phc_foo", 1)
+    foreign["components"] = {"imitator:phc_foo": {"plugin": "foo", "package": "mocap-foo", "version": "1.2.0"}}
+    save_checkpoint(tmp_path / "foreign.pt", foreign)
+    assert main(["eval", str(tmp_path / "foreign.pt")]) != 0
+    err = capsys.readouterr().err
+    assert "unknown imitator 'phc_foo'" in err and "pip install mocap-foo" in err and "Traceback" not in err
