@@ -22,6 +22,7 @@ import io
 from dataclasses import dataclass
 from typing import Iterator
 
+from mocap.conformance import ContractViolation, check_latent_space, check_simulator, check_task, fake_sim_state
 from mocap.plugins import PluginSet, get_plugins, load_plugins, set_plugins
 
 
@@ -57,3 +58,15 @@ def invoke(args: list[str]) -> Result:
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         code = main([str(a) for a in args])
     return Result(code, out.getvalue(), err.getvalue())
+
+
+__all__ = [
+    "ContractViolation",
+    "Result",
+    "check_latent_space",
+    "check_simulator",
+    "check_task",
+    "fake_sim_state",
+    "invoke",
+    "use_plugins",
+]

@@ -195,6 +195,24 @@ class TaskBase:
     def _ids(self, env_ids: Tensor) -> Tensor:
         return torch.as_tensor(env_ids, dtype=torch.long).reshape(-1).to(self.device)
 
+    # ----------------------------------------------------------------------------- resume
+    def state_dict(self) -> dict[str, Any]:
+        """Every per-env tensor of the task (goals, timers, counters) and its generator, so that a
+        resumed task env continues bit-exactly (the metric sums are emptied every PPO iteration)."""
+        tensors = {k: v.detach().clone() for k, v in vars(self).items() if isinstance(v, Tensor)}
+        return {"tensors": tensors, "generator": self.generator.get_state().clone()}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        own = {k: v for k, v in vars(self).items() if isinstance(v, Tensor)}
+        saved = state["tensors"]
+        if set(saved) != set(own):
+            raise ValueError(f"task state of another task: tensors {sorted(saved)} vs {sorted(own)}")
+        for key, value in saved.items():
+            if tuple(value.shape) != tuple(own[key].shape):
+                raise ValueError(f"task state {key!r}: shape {tuple(value.shape)} vs {tuple(own[key].shape)} (another num_envs?)")
+            setattr(self, key, value.to(own[key].device, own[key].dtype).clone())
+        self.generator.set_state(state["generator"].clone())
+
     # ------------------------------------------------------------------------ simulator
     def attach(self, sim: Simulator) -> None:
         """Keep the simulator (its control period ``dt``, ground-only contacts, props)."""
