@@ -203,3 +203,27 @@ def test_task_without_latent_is_a_clear_error(tmp_path):
     with use_plugins(("upright", upright_plugin)):
         result = invoke(["run", spec, "--out", tmp_path / "runs" / "t"])
     assert result.exit_code == 2 and "Traceback" not in result.output and "scratch" in result.stderr
+
+
+def test_task_env_with_goals_resumes_exactly(amp, walk):  # noqa: F811
+    """A goal task (speed: target speed and direction, redrawn on reset) resumes bit-exactly: its
+    goals and generator are part of the env's state (they were not: a resumed stage drew new goals)."""
+    from mocap_sim_mujoco.simulator import MujocoSimulator
+    from mocap_tasks.speed import SpeedParams, make_speed
+
+    def env():  # type: ignore[no-untyped-def]
+        sim = MujocoSimulator(skeleton=amp, num_envs=3, seed=0)
+        task = make_speed(SpeedParams(change_steps=(3, 5)), skeleton=amp, num_envs=3, seed=5)
+        return TaskEnv(task, ScratchLatent(ScratchParams(), amp), lambda obs, out: out, MotionLibrary(walk, amp), sim, seed=1)
+
+    a, b = env(), env()
+    a.reset()
+    g = torch.Generator().manual_seed(0)
+    acts = [torch.rand(3, amp.num_dofs, generator=g) * 2 - 1 for _ in range(20)]
+    for act in acts[:8]:
+        a.step(act)
+    b.load_state_dict(a.state_dict())
+    for act in acts[8:]:  # goals change every 3-4 steps: new ones come from the restored generator
+        ra, rb = a.step(act), b.step(act)
+        assert torch.equal(ra.obs, rb.obs) and torch.equal(ra.reward, rb.reward)
+    a.close(), b.close()
