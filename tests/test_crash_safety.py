@@ -161,3 +161,47 @@ def test_same_spec_and_seed_give_identical_metrics(tmp_path: Path):
     assert recorded["seed"] == 7
     stages = json.loads((tmp_path / "a" / "runs" / "point" / "stages.json").read_text())
     assert stages[0].get("seed") == derive_seed(7, "task"), stages[0]
+
+
+EVAL_SPEC = """\
+spec_version: 1
+name: evalkill
+motions: {name: deepmimic, params: {clips: [walk, run, jump, kick]}}
+imitator: {name: pd_replay}
+eval: {trainer: {name: imitation_eval, params: {video: true, video_seconds: 1.0, num_envs: 2}}}
+"""
+
+
+def _eval_run(spec: Path, out: Path, kill: str | None = None, delay: float = 0.0) -> None:
+    """``mocap run`` of the eval-only spec; ``kill``: SIGKILL ``delay`` s after the eval stage's
+    artifact folder appears ("started") or after its row reached metrics.jsonl ("logged")."""
+    cmd = [sys.executable, "-m", "mocap", "run", str(spec), "--out", str(out)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env={**os.environ, "OMP_NUM_THREADS": "1"})
+    if kill is None:
+        _, err = proc.communicate(timeout=300)
+        assert proc.returncode == 0, err.decode()[-2000:]
+        return
+    deadline = time.monotonic() + 240
+    while proc.poll() is None and time.monotonic() < deadline:
+        started = bool(sorted((out.parent / "artifacts").glob("eval-*")))
+        if (kill == "started" and started) or (kill == "logged" and _logged(out) > 0):
+            break
+        time.sleep(0.01)
+    time.sleep(delay)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=60)
+
+
+def test_sigkill_during_the_eval_stage_leaves_one_eval_row(tmp_path: Path):
+    """Killed during the eval stage (mid-rollout, and right after its row was logged while its video
+    was still being written), then rerun: the run ends with exactly one eval row and its files."""
+    spec = tmp_path / "evalkill.yaml"
+    spec.write_text(EVAL_SPEC)
+    out = tmp_path / "runs" / "e"
+    _eval_run(spec, out, kill="started", delay=random.Random(3).uniform(0.2, 1.5))
+    _eval_run(spec, out, kill="logged", delay=0.0)
+    _eval_run(spec, out)
+    rows = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines() if line.strip()]
+    assert [r["stage"] for r in rows] == ["eval"], rows
+    assert (out / "imitation_eval.json").is_file() and (out / "stages.json").is_file()
+    assert not sorted(out.parent.glob("**/.*.tmp"))
