@@ -26,7 +26,7 @@ from pathlib import Path
 
 def load(target: Path):
     """The built evaluation target of a latent checkpoint (loaded once, rolled out at every scale)."""
-    from mocap.evaluation import build_evaluation_target, load_evaluation_target
+    from mocap.eval_targets import build_evaluation_target, load_evaluation_target
     from mocap.plugins import get_plugins
 
     plugins = get_plugins()
@@ -37,7 +37,8 @@ def load(target: Path):
 
 
 def run_one(loaded, target: Path, noise: float, rollouts: int, seconds: float, seed: int) -> dict:
-    from mocap.generation import GenerationParams, generate_from_target
+    from mocap.generation import GenerationParams
+    from mocap.generation_eval import generate_from_target
 
     params = GenerationParams(num_rollouts=rollouts, seconds=seconds, noise_scale=noise, seed=seed)
     t0 = time.perf_counter()

@@ -26,7 +26,9 @@ def evaluate_checkpoint(checkpoint: Path) -> dict:
     import torch
 
     from mocap.checkpoint import load_checkpoint
-    from mocap.evaluation import ImitationEvalParams, evaluate_imitator, load_evaluation_target
+    from mocap.evaluation import ImitationEvalParams
+    from mocap.eval_targets import load_evaluation_target
+    from mocap.imitation_eval import evaluate_imitator
     from mocap.metrics import default_metrics
     from mocap.motion.library import MotionLibrary
     from mocap.plugins import get_plugins

@@ -154,7 +154,7 @@ def learning(spec_path: Path, plugins, iterations: int, num_envs: int, horizon: 
 
 def _policy_fn(checkpoint: Path, plugins):  # type: ignore[no-untyped-def]
     """flat observation -> the imitator's deterministic raw action (what the env's step takes)."""
-    from mocap.evaluation import load_evaluation_target
+    from mocap.eval_targets import load_evaluation_target
 
     target = load_evaluation_target(checkpoint, plugins)
     resolved = target.resolved
@@ -168,7 +168,7 @@ def _policy_fn(checkpoint: Path, plugins):  # type: ignore[no-untyped-def]
 def realtime(checkpoint: Path, plugins, seconds: float) -> float:
     import torch
 
-    from mocap.evaluation import load_evaluation_target
+    from mocap.eval_targets import load_evaluation_target
     from mocap.motion.library import MotionLibrary
 
     target = load_evaluation_target(checkpoint, plugins)

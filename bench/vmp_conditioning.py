@@ -30,7 +30,7 @@ def rollout(loaded):
     """The protocol's rollout of every clip of a built evaluation target (one env per clip,
     deterministic): its Trajectories."""
     import torch
-    from mocap.evaluation import episode_frames, rollout_imitation
+    from mocap.imitation_eval import episode_frames, rollout_imitation
 
     lib = loaded.library
     ids = torch.arange(lib.num_clips)
@@ -111,12 +111,9 @@ def plot(result: dict, out: Path) -> None:
 def evaluate(target: Path) -> tuple[dict, object]:
     """The protocol's table and joint MAE of one tracker, and the built target (for :func:`rollout`)."""
     import torch
-    from mocap.evaluation import (
-        ImitationEvalParams,
-        build_evaluation_target,
-        evaluate_imitator,
-        load_evaluation_target,
-    )
+    from mocap.evaluation import ImitationEvalParams
+    from mocap.eval_targets import build_evaluation_target, load_evaluation_target
+    from mocap.imitation_eval import evaluate_imitator
     from mocap.metrics import default_metrics
     from mocap.plugins import get_plugins
     from mocap_vmp.metrics import JointMAE, latent_label_metrics

@@ -18,6 +18,8 @@ MAX_THREADS = max(8, 4 * (os.cpu_count() or 1))
 MAX_ENVS = 65536
 #: widest hidden layer
 MAX_WIDTH = 65536
+#: the hidden activations of :data:`mocap.rl.networks.ACTIVATIONS` (its keys), for params that name one
+ACTIVATION_NAMES: tuple[str, ...] = ("elu", "relu", "tanh", "silu", "gelu")
 
 ThreadCount = Annotated[int, Field(ge=1, le=MAX_THREADS)]
 EnvCount = Annotated[int, Field(ge=1, le=MAX_ENVS)]
@@ -25,4 +27,4 @@ LayerWidth = Annotated[int, Field(ge=1, le=MAX_WIDTH)]
 LearningRate = Annotated[float, Field(gt=0.0, le=1.0, allow_inf_nan=False)]
 LogStd = Annotated[float, Field(ge=-20.0, le=5.0, allow_inf_nan=False)]
 
-__all__ = ["MAX_ENVS", "MAX_THREADS", "MAX_WIDTH", "EnvCount", "LayerWidth", "LearningRate", "LogStd", "ThreadCount"]
+__all__ = ["ACTIVATION_NAMES", "MAX_ENVS", "MAX_THREADS", "MAX_WIDTH", "EnvCount", "LayerWidth", "LearningRate", "LogStd", "ThreadCount"]

@@ -18,7 +18,6 @@ read-only folder); the CLI prints either as one ``error:`` line with exit code 2
 
 from __future__ import annotations
 
-import errno
 import json
 import os
 import platform
@@ -30,37 +29,7 @@ from typing import Any
 
 import torch
 
-
-class CheckpointError(ValueError):
-    """A checkpoint that cannot be used as asked: the message names the file and what to do."""
-
-
-class StorageError(OSError):
-    """Writing a file failed (disk full, read-only or unwritable folder); the message names the file.
-
-    An :class:`OSError` (``errno`` is the cause's) whose ``str`` is the whole user-facing message.
-    """
-
-    def __init__(self, path: Path | str, cause: OSError, *, previous_kept: bool = False):
-        super().__init__(cause.errno, cause.strerror or str(cause), str(path))
-        self.path = Path(path)
-        if cause.errno in DISK_FULL:
-            what = "the disk is full (no space left on device)" if cause.errno == errno.ENOSPC else "the disk quota is exceeded"
-            hint = "free some space and run the same command again (a run resumes from its last checkpoint)"
-        elif cause.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
-            what = f"the folder is not writable ({cause.strerror or cause})"
-            hint = "choose a writable location"
-        else:
-            what = cause.strerror or str(cause)
-            hint = "check the disk and run the same command again"
-        kept = f"; the previous {self.path.name} is unchanged" if previous_kept else ""
-        self.message = f"cannot write {self.path}: {what}{kept}; {hint}"
-
-    def __str__(self) -> str:
-        return self.message
-
-
-DISK_FULL = frozenset(e for e in (errno.ENOSPC, getattr(errno, "EDQUOT", None)) if e is not None)
+from mocap.errors import DISK_FULL, CheckpointError, StorageError  # noqa: F401  (defined there, re-exported)
 
 
 def package_versions() -> dict[str, str]:

@@ -80,9 +80,8 @@ def _load(spec_path: Path, overrides: list[str] | None):  # -> ResolvedSpec
 
 def cmd_validate(spec: Annotated[Path, typer.Argument(help="spec YAML file")], set_: SetOption = None) -> None:
     """Check a spec (structure, plugin names, every component's params) without running it."""
-    from mocap.pipeline import resolved_stage_keys
-
     from mocap.matrix import load_cells
+    from mocap.stage_keys import resolved_stage_keys
 
     cells = load_cells(spec, _plugins(), set_ or [])
     for cell, resolved in cells:

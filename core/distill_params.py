@@ -9,7 +9,7 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from mocap.bounds import EnvCount, LearningRate, ThreadCount
-from mocap.fail_states import FailStateParams
+from mocap.fail_state_params import FailStateParams
 
 
 # ---------------------------------------------------------------------------------- parameters

@@ -84,7 +84,7 @@ def _from_file(target: Path, plugins: Any) -> EvalTarget:
 
     doc = resolve_embedded_paths(yaml_mapping(spec_yaml, f"{target} (embedded spec)"), target.parent)
     resolved = validate_document(doc, plugins, source=f"{target} (embedded spec)", provenance=data.get("components"))
-    from mocap.distill import CHECKPOINT_FORMAT as DISTILL_FORMAT, LATENT_FORMAT
+    from mocap.distill_files import CHECKPOINT_FORMAT as DISTILL_FORMAT, LATENT_FORMAT
 
     if data.get("format") in (LATENT_FORMAT, DISTILL_FORMAT) or (resolved.spec.imitator is None and resolved.spec.latent is not None):
         teacher = _stage_checkpoint(resolved.spec, "imitator")
@@ -112,7 +112,7 @@ def _check_known_format(path: Path, data: dict[str, Any]) -> None:
     :class:`~mocap.checkpoint.CheckpointError` naming both versions (other formats pass: their
     plugin checks them)."""
     from mocap.checkpoint import check_format, split_format
-    from mocap.distill import CHECKPOINT_FORMAT as DISTILL_FORMAT, LATENT_FORMAT
+    from mocap.distill_files import CHECKPOINT_FORMAT as DISTILL_FORMAT, LATENT_FORMAT
     from mocap.rl.networks import POLICY_FORMAT
     from mocap.rl.ppo import CHECKPOINT_FORMAT as PPO_FORMAT
 
@@ -230,7 +230,7 @@ def _is_distilled(path: Path) -> bool:
     format, decoded through the imitator it was distilled from) rather than a latent space with a
     policy of its own (VMP's tracker)."""
     from mocap.checkpoint import load_checkpoint
-    from mocap.distill import CHECKPOINT_FORMAT, LATENT_FORMAT
+    from mocap.distill_files import CHECKPOINT_FORMAT, LATENT_FORMAT
 
     return load_checkpoint(path).get("format") in (LATENT_FORMAT, CHECKPOINT_FORMAT)
 
@@ -240,7 +240,7 @@ def build_evaluation_target(
 ) -> LoadedTarget:
     """Build the skeleton, motion library (``motions``: another source, default params), the
     imitator, the latent space (when ``target`` has one and ``use_latent``) and the simulator factory."""
-    from mocap.distill import load_latent_state
+    from mocap.distill_files import load_latent_state
     from mocap.latent_imitator import PDTargetTeacher, latent_imitator
 
     resolved, spec = target.resolved, target.spec

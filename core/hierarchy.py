@@ -1,62 +1,21 @@
-"""Hierarchical control: a task policy acting in the task action space of any latent space.
+"""Hierarchical control: the ``hierarchy`` plugin registers the ``scratch`` latent space (the no-latent
+baseline: the task action is the normalized PD target) and defines its params.
 
-The ``task`` stage of a spec (``task: {name: speed, params: ..., trainer: {name: ppo, ...}}``)
-trains a policy with PPO on a :class:`TaskEnv`:
-
-* **observation** = ``[s^p | g]``: the humanoid's proprioception (:func:`mocap.observations.proprioception`,
-  heading frame) and the task's goal observation ``task.observe(state)``;
-* **action** ``a`` in ``latent.task_action_space`` (PULSE: a continuous residual; Hybrid-RVQ: code
-  indices; ``scratch``: normalized PD targets). The frozen latent space maps it:
-  ``z = latent.to_latent(obs, a)``, ``out = latent.decoder(obs, z)``, and ``out`` becomes PD targets
-  (identity for a decoder distilled with ``label: pd_targets`` and for ``scratch``; otherwise the
-  imitator's ``to_pd_targets``, which must not need a reference motion);
-* **reward / termination** from the task (``task.reward``, ``task.terminated``) plus numerical
-  instability; **truncation** after ``task.episode_steps`` (default 300 = 10 s);
-* **starts**: reference states of the motion library (clip and time drawn with its weights) in
-  which every non-foot body is above 0.25 m (standing or moving, not lying), then ``task.reset``;
-* **logged**: episode return, length and **normalized return** = return / (``task.max_reward`` ×
-  ``episode_steps``) (PULSE Fig. 4), and the task's own metrics every iteration (``task.metrics()``).
-
-Tasks never see which latent space drives the humanoid; latent spaces never see the task. What
-the env reads from a task beyond the four abstract methods is declared, with defaults, on
-:class:`mocap.interfaces.Task`: ``episode_steps``, ``max_reward``, ``sim_overrides`` (simulator
-params the task needs, e.g. the strike target), ``attach(sim)``, ``attach_motions(library)``,
-``start_state(env_ids, frames)`` (may replace the start frames: terrain's spawn square, inbetween's
-keyframe sequence; a :class:`~mocap.state.MotionFrames` result also names clip and time),
-``step(state)`` (after each reward), ``truncated(state)`` (OR-ed with the time limit),
-``state_dict()`` / ``load_state_dict()``, ``prior_rollout`` / ``prior_noise_scale`` (the task action
-is ignored and ``latent.random_action`` is rolled out; a latent without ``samples_prior`` is
-refused), and for tasks that follow a reference motion (``tracks_reference``: ``vr_tracking``,
-``hmd_tracking``, ``motion_tracking``) ``reference_start(env_ids, clip_ids, times)``, called on
-every reset before ``task.reset``. A task factory that names a ``motions`` parameter (or takes
-``**kwargs``) receives the env's :class:`~mocap.motion.library.MotionLibrary`. From the latent
-space the env uses :meth:`~mocap.interfaces.LatentSpace.decode_action`, ``reset_envs`` and
-``task_state_dict`` (declared there with defaults).
-
-``scratch`` (registered here) is the no-latent baseline: a latent space whose task action is the
-PD target itself, ``q = offset + scale · a`` with ``a`` in [-1, 1] mapped to each joint's range
-(PHC's absolute action mapping), so that "task policy from scratch" runs through the same code.
+The task env (a task policy acting in the task action space of any latent space, the ``task``
+stage's RL env) and ``scratch``'s module live in :mod:`mocap.task_env`, imported only when a spec
+builds them: loading this plugin imports no torch. Their names are still reachable here
+(``mocap.hierarchy.TaskEnv``).
 """
 
 from __future__ import annotations
 
-import inspect
-from typing import Any, Callable
+import importlib
+from typing import Any
 
-import torch
 from pydantic import BaseModel, ConfigDict, Field
-from torch import Tensor
 
 from mocap.hooks import hookimpl
-from mocap.interfaces import Box, LatentSample, LatentSpace, MultiDiscrete, Simulator, Task
-from mocap.motion.library import MotionLibrary, grid_start_times
-from mocap.observations import SixD, proprioception
-from mocap.rl.env import StepResult
-from mocap.sim_snapshot import load_sim_state, save_sim_state
-from mocap.skeleton import Skeleton
-from mocap.state import HumanoidState, MotionFrames, Observations, SimState
-
-STATE_FORMAT = "mocap.task_env/1"
+from mocap.plugins import lazy
 
 
 # ---------------------------------------------------------------------------------- scratch
@@ -67,280 +26,24 @@ class ScratchParams(BaseModel):
     )
 
 
-class ScratchLatent(LatentSpace):
-    """No latent space: the task action is the normalized PD target (module docstring)."""
-
-    offset: Tensor  # buffers (register_buffer in __init__)
-    scale: Tensor
-
-    def __init__(self, params: ScratchParams, skeleton: Skeleton):
-        super().__init__()
-        lo_t = torch.tensor([float(h.range[0]) for h in skeleton.hinges])
-        hi_t = torch.tensor([float(h.range[1]) for h in skeleton.hinges])
-        self.register_buffer("offset", 0.5 * (lo_t + hi_t))
-        self.register_buffer("scale", 0.5 * (hi_t - lo_t) * params.range_scale)
-        self.latent_dim = skeleton.num_dofs
-
-    def encoder(self, obs: Observations) -> LatentSample:
-        raise NotImplementedError("scratch has no encoder: it is the no-latent baseline")
-
-    def prior(self, obs: Observations) -> LatentSample:
-        zero = torch.zeros(obs.proprio.shape[0], self.latent_dim, device=obs.proprio.device)
-        return LatentSample(mean=zero, std=None, z=zero)
-
-    def decoder(self, obs: Observations, z: Tensor) -> Tensor:
-        return self.offset + self.scale * z
-
-    @property
-    def task_action_space(self) -> Box:
-        return Box((self.latent_dim,), low=-1.0, high=1.0)
-
-    def to_latent(self, obs: Observations, task_action: Tensor) -> Tensor:
-        return task_action.float().clamp(-1.0, 1.0)
-
-
-def make_scratch(params: ScratchParams, *, skeleton: Skeleton, checkpoint: Any = None, device: Any = "cpu") -> ScratchLatent:
-    return ScratchLatent(params, skeleton).to(device)
-
-
-# ------------------------------------------------------------------------------------- env
-class TaskEnv:
-    """A batched downstream task driven through a frozen latent space (module docstring)."""
-
-    def __init__(
-        self,
-        task: Task,
-        latent: LatentSpace,
-        to_pd_targets: Callable[[Observations, Tensor], Tensor],
-        library: MotionLibrary,
-        sim: Simulator,
-        *,
-        seed: int = 0,
-        sixd: SixD = "zhou",
-        start_min_height: float = 0.25,
-    ):
-        self.task, self.latent, self.map_targets = task, latent, to_pd_targets
-        self.library, self.sim = library, sim
-        self.num_envs = int(sim.num_envs)
-        self.skeleton = sim.skeleton
-        self.sixd = sixd
-        self.start_min_height = float(start_min_height)
-        self.episode_steps = int(task.episode_steps)
-        self.max_reward = float(task.max_reward)
-        self.action_space = latent.task_action_space
-        self.proprio_dim = 15 * self.skeleton.num_bodies - 2
-        self.obs_dim = self.proprio_dim + int(task.goal_dim)
-        self._gen = torch.Generator().manual_seed(int(seed))
-        self.steps = torch.zeros(self.num_envs, dtype=torch.long)
-        self.ep_return = torch.zeros(self.num_envs)
-        self._obs: Tensor | None = None
-        latent.eval()
-        # the decoder's raw output (PULSE: decode_action; its `decoder` maps through an attached imitator)
-        self._decode = latent.decode_action
-        #: the generation task: the task action is ignored, the latent prior is rolled out
-        self.prior_rollout = bool(task.prior_rollout)
-        self.prior_noise_scale = float(task.prior_noise_scale)
-        self._prior_gen = torch.Generator().manual_seed(int(seed) + 1)
-        if self.prior_rollout and not latent.samples_prior:
-            raise ValueError(
-                f"task {type(task).__name__} rolls out the latent space's prior, and {type(latent).__name__} has none "
-                "(no random_action): `scratch` is the no-latent baseline, there is no prior to sample; use a trained "
-                "latent space (pulse, hybrid_rvq)"
-            )
-        task.attach(sim)
-        task.attach_motions(library)
-        # a task that follows the clip it started from reads the reference every step: start it on
-        # the control grid and read the reference from the precomputed table (MotionLibrary.use_control_grid)
-        self._tracks_reference = bool(task.tracks_reference)
-        if self._tracks_reference:
-            library.use_control_grid(float(sim.dt), self.episode_steps + 2)
-
-    # ------------------------------------------------------------------------------- helpers
-    def _proprio(self, state: SimState) -> Observations:
-        return Observations(proprio=proprioception(state, self.sixd).float(), goal=None, extra={})
-
-    def _observe(self, state: SimState) -> Tensor:
-        return torch.cat([proprioception(state, self.sixd).float(), self.task.observe(state).float()], -1)
-
-    def _reset_envs(self, ids: Tensor) -> None:
-        from mocap.generation import start_states
-
-        clip_ids, times = start_states(self.library, len(ids), self.skeleton, self.start_min_height, self._gen)
-        if self._tracks_reference:
-            lib = self.library
-            dur = lib.durations.to(times.device, torch.float64)[clip_ids]
-            times = grid_start_times(times.to(torch.float64), dur, lib.loops[clip_ids], float(self.sim.dt))
-        sampled = self.library.frames(clip_ids, times)
-        frames: HumanoidState = self.task.start_state(ids, sampled)  # terrain spawn square, keyframe-sequence start
-        if isinstance(frames, MotionFrames):
-            clip_ids, times = frames.clip_ids, frames.times
-        self.sim.reset(ids, frames)
-        self.latent.reset_envs(ids)  # latents with per-env state (VMP: the tracker's action history)
-        self.steps[ids] = 0
-        self.ep_return[ids] = 0.0
-        if self._tracks_reference:  # tasks that track the reference they were started from
-            self.task.reference_start(ids, clip_ids, times)
-        self.task.reset(ids, self.sim.state)
-
-    # ---------------------------------------------------------------------------------- VecEnv
-    def reset(self) -> Tensor:
-        self._reset_envs(torch.arange(self.num_envs))
-        self._obs = self._observe(self.sim.state)
-        return self._obs.clone()
-
-    @torch.no_grad()
-    def pd_targets(self, state: SimState, actions: Tensor) -> Tensor:
-        """PD targets of task actions ``actions`` in ``state`` through the frozen latent space."""
-        obs = self._proprio(state)
-        if self.prior_rollout:
-            raw = self.latent.random_action(obs, noise_scale=self.prior_noise_scale, generator=self._prior_gen)
-        else:
-            z = self.latent.to_latent(obs, actions)
-            raw = self._decode(obs, z)
-        return self.map_targets(obs, raw)
-
-    def step(self, actions: Tensor) -> StepResult:
-        state = self.sim.state
-        targets = self.pd_targets(state, actions)
-        state = self.sim.step(targets)
-        reward = self.task.reward(state, actions).float().cpu()
-        self.task.step(state)
-        self.steps += 1
-        self.ep_return += reward
-        unstable = state.unstable.cpu() if state.unstable.numel() else torch.zeros(self.num_envs, dtype=torch.bool)
-        terminated = self.task.terminated(state).cpu().bool() | unstable
-        truncated = self.steps >= self.episode_steps
-        task_truncated = self.task.truncated(state)
-        if task_truncated is not None:  # e.g. the tracked clip ran out
-            truncated = truncated | task_truncated.cpu().bool()
-        truncated = truncated & ~terminated
-        final_obs = self._observe(state)
-        done = terminated | truncated
-        episodes: dict[str, Tensor] = {}
-        if bool(done.any()):
-            ids = done.nonzero().squeeze(-1)
-            episodes = {
-                "return": self.ep_return[ids].clone(),
-                "length": self.steps[ids].float(),
-                "normalized_return": self.ep_return[ids] / (self.max_reward * self.episode_steps),
-                "success": (~terminated[ids]).float(),
-            }
-            self._reset_envs(ids)
-            obs = self._observe(self.sim.state)
-        else:
-            obs = final_obs
-        self._obs = obs
-        info = {"reward": float(reward.mean()), "unstable": float(unstable.float().mean())}
-        return StepResult(obs.clone(), reward, terminated, truncated, final_obs, info, episodes)
-
-    def after_iteration(self, iteration: int, policy_fn: Any) -> dict[str, float]:
-        """The task's metrics accumulated over the iteration (logged under ``eval/``)."""
-        return {k: float(v) for k, v in self.task.metrics().items()}
-
-    def state_dict(self) -> dict[str, Any]:
-        sd: dict[str, Any] = {
-            "format": STATE_FORMAT,
-            "num_envs": self.num_envs,
-            "generator": self._gen.get_state().clone(),
-            "steps": self.steps.clone(),
-            "ep_return": self.ep_return.clone(),
-            "prior_generator": self._prior_gen.get_state().clone(),
-        }
-        sd.update(save_sim_state(self.sim))
-        sd["task"] = self.task.state_dict()
-        sd["latent"] = self.latent.task_state_dict()
-        return sd
-
-    def load_state_dict(self, state: dict[str, Any]) -> None:
-        if state.get("format") != STATE_FORMAT:
-            raise ValueError(f"not a TaskEnv state (format {state.get('format')!r})")
-        if int(state["num_envs"]) != self.num_envs:
-            raise ValueError(f"state has {state['num_envs']} envs, this env {self.num_envs}")
-        self._gen.set_state(state["generator"].clone())
-        self.steps = state["steps"].clone()
-        self.ep_return = state["ep_return"].clone()
-        if "prior_generator" in state:
-            self._prior_gen.set_state(state["prior_generator"].clone())
-        load_sim_state(self.sim, torch.arange(self.num_envs), state)
-        if "task" in state:
-            self.task.load_state_dict(state["task"])
-        if "latent" in state:
-            self.latent.load_task_state_dict(state["latent"])
-        self._obs = self._observe(self.sim.state)
-
-    def close(self) -> None:
-        self.sim.close()
-
-
-def _accepts(factory: Callable[..., Any], name: str) -> bool:
-    """``factory`` has a parameter ``name`` or takes ``**kwargs``."""
-    try:
-        params = inspect.signature(factory).parameters.values()
-    except (TypeError, ValueError):  # no signature (a builtin): do not pass extras
-        return False
-    return any(p.name == name or p.kind is inspect.Parameter.VAR_KEYWORD for p in params)
-
-
-def make_task_env(ctx: Any, num_envs: int) -> TaskEnv:
-    """The ``task`` stage's RL env (called by ``StageContext.make_rl_env``): the spec's task, its
-    latent space (trained upstream, or untrained such as ``scratch``) and the simulator with the
-    task's ``sim_overrides``."""
-    from mocap.pipeline import StageFailed
-
-    spec = ctx.spec
-    if spec.latent is None:
-        raise StageFailed("the task stage needs a latent space (use `latent: {name: scratch}` for a policy without one)")
-    skeleton = ctx.skeleton
-    task_ref = spec.task
-    motion_set = ctx.build("motions").load(skeleton)
-    library = MotionLibrary(motion_set, skeleton)
-    component = ctx.plugins.get("task", task_ref.name)
-    extra: dict[str, Any] = {"motions": library} if _accepts(component.factory, "motions") else {}
-    task = component.build(ctx.params("task"), skeleton=skeleton, num_envs=num_envs, device="cpu", **extra)
-    latent_stage = ctx.upstream.get("latent")
-    latent_ckpt = latent_stage.checkpoint if latent_stage is not None else None
-    if latent_ckpt is None and spec.latent.trainer is not None:
-        raise StageFailed("the latent stage has no checkpoint")
-    latent = ctx.stage_component("latent", checkpoint=latent_ckpt)
-    label = "pd_targets"
-    if latent_ckpt is not None and not latent.decodes_pd_targets:
-        from mocap.distill import load_latent_state
-
-        label = str(load_latent_state(latent_ckpt)["extra"].get("label", "policy_output"))
-    if label == "pd_targets":
-        mapping: Callable[[Observations, Tensor], Tensor] = lambda obs, out: out  # noqa: E731
-    else:
-        imitator_stage = ctx.upstream.get("imitator")
-        imitator = ctx.stage_component("imitator", checkpoint=imitator_stage.checkpoint if imitator_stage else None)
-        mapping = imitator.to_pd_targets
-    sim_ref = spec.simulator
-    sim_params = ctx.params("simulator")
-    overrides = dict(task.sim_overrides)
-    if overrides:
-        sim_params = type(sim_params).model_validate({**sim_params.model_dump(), **overrides})
-    sim = ctx.plugins.get("simulator", sim_ref.name).build(sim_params, skeleton=skeleton, num_envs=num_envs, seed=ctx.seed)
-    try:
-        env = TaskEnv(task, latent, mapping, library, sim, seed=ctx.seed)
-    except ValueError as exc:  # e.g. the generation task with scratch (no prior)
-        sim.close()
-        raise StageFailed(f"task {task_ref.name} with latent {spec.latent.name}: {exc}") from None
-    space = env.action_space
-    probe = (
-        torch.zeros(num_envs, len(space.nvec), dtype=torch.long) if isinstance(space, MultiDiscrete) else torch.zeros(num_envs, *space.shape)
-    )
-    try:  # a decoder that needs the reference motion fails here, before training starts
-        env.pd_targets(sim.state, probe)
-    except ValueError as exc:
-        raise StageFailed(
-            f"task {task_ref.name}: the latent space cannot act without a reference motion ({exc}); distill it with "
-            "label: pd_targets or use an imitator with absolute actions"
-        ) from None
-    return env
-
-
 @hookimpl
 def register_latent_spaces(register):  # type: ignore[no-untyped-def]
-    register("scratch", make_scratch, params=ScratchParams, description="no latent space: task actions are normalized PD targets (baseline)")
+    register(
+        "scratch",
+        lazy("mocap.task_env:make_scratch"),
+        params=ScratchParams,
+        description="no latent space: task actions are normalized PD targets (baseline)",
+    )
 
 
-__all__ = ["ScratchLatent", "ScratchParams", "TaskEnv", "make_scratch", "make_task_env"]
+#: names defined in :mod:`mocap.task_env`, reachable from here too (imported on first use)
+_MOVED = ("STATE_FORMAT", "ScratchLatent", "TaskEnv", "make_scratch", "make_task_env")
+
+
+def __getattr__(name: str) -> Any:
+    if name in _MOVED:
+        return getattr(importlib.import_module("mocap.task_env"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+__all__ = ["ScratchParams"]

@@ -28,23 +28,13 @@ Energy penalty (``dof_force`` tau and ``dof_vel`` q-dot, per hinge):
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
 
 import torch
 from torch import Tensor
 
+from mocap.imitation_reward_params import CODE_ENERGY_WARMUP, DEFAULT_SCALES, DEFAULT_WEIGHTS, TERMS, EnergyForm, RewardForm
 from mocap.rotations import quat_angle, quat_conjugate, quat_mul
 from mocap.state import HumanoidState
-
-RewardForm = Literal["paper", "code"]
-EnergyForm = Literal["paper", "code"]
-
-#: names of the four imitation terms, in the order of weights and scales
-TERMS: tuple[str, ...] = ("pos", "rot", "vel", "ang_vel")
-DEFAULT_WEIGHTS: tuple[float, float, float, float] = (0.5, 0.3, 0.1, 0.1)
-DEFAULT_SCALES: tuple[float, float, float, float] = (100.0, 10.0, 0.1, 0.1)
-#: steps at the start of an episode with no energy penalty in the code form (``progress_buf <= 3``)
-CODE_ENERGY_WARMUP = 3
 
 
 def _vector_error(diff: Tensor, form: RewardForm) -> Tensor:

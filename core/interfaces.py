@@ -29,38 +29,13 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from mocap.roles import ActionSpace, Box, MotionSource, MultiDiscrete
 from mocap.skeleton import Skeleton
 from mocap.state import HumanoidState, MotionFrames, Observations, SimState, Trajectories
 
 if TYPE_CHECKING:  # pragma: no cover
     from mocap.observations import SixD
     from mocap.pipeline import StageContext
-
-
-# --------------------------------------------------------------------------------------- spaces
-@dataclass(frozen=True)
-class Box:
-    """A continuous action space of ``shape`` with elementwise bounds (``inf`` for unbounded).
-
-    ``exploration_sigma``: the exploration σ the space's method prescribes for a Gaussian policy on
-    it (PULSE Sec. 4.3: a fixed 0.22 on the prior residual), used by PPO when the spec leaves
-    ``log_std_init`` unset; None: no prescription.
-    """
-
-    shape: tuple[int, ...]
-    low: float = float("-inf")
-    high: float = float("inf")
-    exploration_sigma: float | None = None
-
-
-@dataclass(frozen=True)
-class MultiDiscrete:
-    """One categorical choice per entry of ``nvec`` (e.g. a code index per RVQ codebook)."""
-
-    nvec: tuple[int, ...]
-
-
-ActionSpace = Box | MultiDiscrete
 
 
 # ----------------------------------------------------------------------------------- simulator
@@ -383,22 +358,6 @@ class Task(ABC):
 
     def load_state_dict(self, state: dict[str, Any]) -> None:  # noqa: B027 - optional hook
         """Restore :meth:`state_dict`."""
-
-
-# --------------------------------------------------------------------------------- motion data
-class MotionSource(ABC):
-    """Loads clips from some format and converts them to :class:`mocap.motion.clip.Clip`."""
-
-    @abstractmethod
-    def load(self, skeleton: Skeleton) -> Any:
-        """Return a ``MotionSet`` of clips on ``skeleton`` (bad files skipped and listed, or an error)."""
-
-    def inputs(self) -> list[Path]:
-        """The files :meth:`load` reads. The pipeline fingerprints their contents into every stage's
-        artifact key (:func:`mocap.fingerprint.files_fingerprint`), so a clip edited in place is
-        trained on again instead of being served from a stale stage. Default: none (the spec's
-        params alone identify the data, e.g. clips generated from the params)."""
-        return []
 
 
 # ------------------------------------------------------------------------------------- metrics

@@ -3,7 +3,7 @@
 PULSE (Table 1) and the other distilled latent spaces are evaluated *as imitators*: the teacher's
 observation (proprioception + next-frame imitation goal), ``z`` = the encoder's mean, the decoder's
 action, and the teacher's mapping from raw policy output to PD targets. :class:`LatentImitator`
-packages exactly that, so :func:`mocap.evaluation.evaluate_imitator`, ``rollout_imitation`` and
+packages exactly that, so :func:`mocap.imitation_eval.evaluate_imitator`, ``rollout_imitation`` and
 ``mocap eval`` treat a latent space like any imitator.
 
 Two kinds of latent space are handled:

@@ -26,15 +26,14 @@ from __future__ import annotations
 from typing import Sequence
 
 import torch
-from pydantic import BaseModel, ConfigDict, Field
 from torch import Tensor
 
 from mocap.interfaces import Metric
-from mocap.metric_display import MetricInfo
+from mocap.metric_params import BUILTIN_DISPLAY, BUILTIN_INFO, PROTOCOL, SuccessParams
 from mocap.rotations import quat_angle_between
 from mocap.state import Trajectories
 
-PROTOCOL = "mocap-imitation-v1 (success: mean body error <= 0.5 m at every frame; mm; per-frame units at the stated fps)"
+__all__ = ["BUILTIN_DISPLAY", "BUILTIN_METRICS", "PROTOCOL", "SuccessParams", "default_metrics", "make_metric", "success"]
 
 
 def _masked_mean(values: Tensor, mask: Tensor) -> Tensor:
@@ -125,12 +124,6 @@ def success(
 
 
 # ----------------------------------------------------------------------- registered metrics
-class SuccessParams(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-    threshold: float = Field(0.5, gt=0, description="m; PHC/PULSE evaluation uses 0.5 (PHC training terminates at 0.25)")
-    grace_frames: int = Field(0, ge=0, description="frames at the start that are not checked")
-
-
 class _FnMetric(Metric):
     def __init__(self, name: str, unit: str, fn, **kwargs):
         self.name, self.unit, self._fn, self._kwargs = name, unit, fn, kwargs
@@ -144,27 +137,16 @@ def _success_metric(params: SuccessParams, reduce: str, bodies: Sequence[int] | 
     return _FnMetric(name, "fraction", success, threshold=params.threshold, grace_frames=params.grace_frames, reduce=reduce, bodies=bodies)
 
 
-BUILTIN_METRICS = {
-    "mpjpe_g": ("mm", mpjpe_global, "global mean per-body position error"),
-    "mpjpe_l": ("mm", mpjpe_local, "root-relative mean per-body position error"),
-    "pa_mpjpe": ("mm", pa_mpjpe, "per-body error after similarity Procrustes alignment"),
-    "vel_err": ("mm/frame", velocity_error, "body velocity error per frame at the evaluation fps"),
-    "acc_err": ("mm/frame^2", acceleration_error, "body acceleration error per frame^2 at the evaluation fps"),
-    "rot_err": ("deg", rotation_error, "mean geodesic angle between simulated and reference body orientations"),
+_FUNCTIONS = {
+    "mpjpe_g": mpjpe_global,
+    "mpjpe_l": mpjpe_local,
+    "pa_mpjpe": pa_mpjpe,
+    "vel_err": velocity_error,
+    "acc_err": acceleration_error,
+    "rot_err": rotation_error,
 }
-
-
-#: how reports show each built-in metric (declared with its registration)
-BUILTIN_DISPLAY: dict[str, MetricInfo] = {
-    "mpjpe_g": MetricInfo("MPJPE-g", "mm"),
-    "mpjpe_l": MetricInfo("MPJPE-l", "mm"),
-    "pa_mpjpe": MetricInfo("PA-MPJPE", "mm"),
-    "vel_err": MetricInfo("velocity error", "mm/frame"),
-    "acc_err": MetricInfo("acceleration error", "mm/frame²"),
-    "rot_err": MetricInfo("rotation error", "°"),
-    "success": MetricInfo("success rate"),
-    "success_linf": MetricInfo("success rate (max body)"),
-}
+#: name -> (unit, function, description) of every built-in metric (units and descriptions: :mod:`mocap.metric_params`)
+BUILTIN_METRICS = {name: (unit, _FUNCTIONS[name], description) for name, (unit, description) in BUILTIN_INFO.items()}
 
 
 def make_metric(name: str) -> Metric:

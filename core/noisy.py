@@ -28,7 +28,7 @@ p_(k-1))`` for the root position and ``q_k = slerp(q_(k-1), x_k, a)`` for every 
 (0, 1] (1: no smoothing). It trades jitter for a lag of about ``(1 - a) / a`` frames.
 
 Protocol (:func:`evaluate_noisy`): for each level, the same imitation protocol as ``mocap eval``
-(:func:`mocap.evaluation.evaluate_imitator`: every clip once from its first frame, deterministic
+(:func:`mocap.imitation_eval.evaluate_imitator`: every clip once from its first frame, deterministic
 actions, failure when the mean body error exceeds 0.5 m) with the policy observing the noisy
 clip and every metric (success, MPJPE-g, MPJPE-l, PA-MPJPE, velocity and acceleration errors)
 computed against the clean clip. The humanoid starts in the clean first frame, so a level's
@@ -44,13 +44,12 @@ from pathlib import Path
 from typing import Annotated, Any, Optional
 
 import numpy as np
-import torch
 import typer
 from pydantic import BaseModel, ConfigDict, Field
 
 from mocap.hooks import hookimpl
-from mocap.interfaces import Imitator
-from mocap.rotations import quat_from_rotvec, quat_mul, quat_normalize
+
+# torch is imported by the functions that use it: loading the plugin (``mocap --help``) imports no torch
 
 PROTOCOL = "mocap-noisy-reference-v1"
 
@@ -82,6 +81,10 @@ DEFAULT_LEVELS: tuple[NoiseLevel, ...] = (
 def _jitter(q: np.ndarray, deg: float, rng: np.random.Generator) -> np.ndarray:
     if deg == 0:
         return q
+    import torch
+
+    from mocap.rotations import quat_from_rotvec, quat_mul, quat_normalize
+
     rv = rng.normal(0.0, math.radians(deg), size=q.shape[:-1] + (3,))
     out = quat_mul(quat_from_rotvec(torch.from_numpy(rv)), torch.from_numpy(q).to(torch.float64))
     return quat_normalize(out).numpy()
@@ -123,6 +126,8 @@ def smooth_clip(clip: Any, alpha: float) -> Any:
         raise ValueError(f"smoothing alpha must be in (0, 1], got {alpha:g}")
     if alpha == 1:
         return clip
+    import torch
+
     from mocap.rotations import quat_slerp
 
     pos = clip.root_pos.copy()
@@ -171,7 +176,9 @@ def evaluate_noisy(
     ``policy``: an imitator, or a function ``library -> imitator`` for a policy bound to the clips
     it tracks (VMP's tracker reads its windows from a library; it gets the noisy one).
     """
-    from mocap.evaluation import ImitationEvalParams, evaluate_imitator
+    from mocap.evaluation import ImitationEvalParams
+    from mocap.imitation_eval import evaluate_imitator
+    from mocap.interfaces import Imitator
     from mocap.metrics import default_metrics
 
     if not levels:
@@ -276,7 +283,7 @@ def register_commands(app: Any) -> None:
 
         from rich.console import Console
 
-        from mocap.evaluation import build_evaluation_target, load_evaluation_target
+        from mocap.eval_targets import build_evaluation_target, load_evaluation_target
         from mocap.plugins import get_plugins
 
         from mocap.errors import UserError

@@ -1,16 +1,16 @@
 """Watching a policy: ``mocap play TARGET`` (MuJoCo's interactive viewer) and the policy modes of
 ``mocap render TARGET`` (the same rollouts written to an MP4 / GIF, headless).
 
-``TARGET`` is anything ``mocap eval`` accepts (:func:`mocap.evaluation.load_evaluation_target`): a
+``TARGET`` is anything ``mocap eval`` accepts (:func:`mocap.eval_targets.load_evaluation_target`): a
 ``policy.pt`` / ``latent.pt``, a checkpoint directory, a run directory or a spec. One simulator env
 is rolled out by a :class:`Player`, which holds all the stepping logic and knows nothing of windows:
 
 * **imitate** (default): the policy (a latent space as an imitator, ``z`` = encoder mean, or the
   imitator itself) tracks a clip from its first frame, exactly as
-  :func:`mocap.evaluation.rollout_imitation` does; the episode restarts at the end of the clip
+  :func:`mocap.imitation_eval.rollout_imitation` does; the episode restarts at the end of the clip
   (looping clips: after ``horizon`` seconds);
 * **generate** (``G``; needs a latent space with ``random_action``): random motion from the latent
-  prior without a reference, as :func:`mocap.generation.evaluate_generation` does (a start state
+  prior without a reference, as :func:`mocap.generation_eval.evaluate_generation` does (a start state
   drawn from the motion library, proprioception-only observations, the prior's action decoded to PD
   targets); a new sample every ``horizon`` seconds.
 
@@ -26,7 +26,7 @@ plugin next to ``mocap render`` (:mod:`mocap_sim_mujoco.commands`): the viewer i
 its latent space instead (:mod:`mocap.task_video`).
 
 ``mocap render TARGET --clip C`` writes the imitate rollout with
-:func:`mocap.evaluation.record_video` (the reference drawn as a ghost); ``--generate`` records a
+:func:`mocap.imitation_eval.record_video` (the reference drawn as a ghost); ``--generate`` records a
 :class:`Player` rollout from the prior (same seed, same rollout as pressing ``G`` once in ``play``)
 with the simulator's video recorder.
 """
@@ -40,10 +40,9 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any, Callable, Optional, Protocol, runtime_checkable
+from typing import Any, Callable, Protocol, runtime_checkable
 
 import torch
-import typer
 
 
 @runtime_checkable
@@ -122,7 +121,7 @@ class Player:
     """Rolls one simulator env out under :class:`PlayControls` (module docstring).
 
     Args:
-        loaded: the built target (:func:`mocap.evaluation.build_evaluation_target`).
+        loaded: the built target (:func:`mocap.eval_targets.build_evaluation_target`).
         sim: a one-env simulator of the target (``loaded.make_sim(1)``).
         clip: the clip to start with (default: the first).
         generate: start in generate mode.
@@ -212,7 +211,7 @@ class Player:
         self.steps, self.budget = 0, 0.0
         self.episodes += 1
         if self.controls.mode == "generate":
-            from mocap.generation import start_states
+            from mocap.generation_eval import start_states
 
             ids, times = start_states(self.lib, 1, self.sim.skeleton, 0.25, self.generator)
         else:
@@ -236,7 +235,7 @@ class Player:
             self.reset()
 
     def _step_imitate(self) -> None:
-        # as mocap.evaluation.rollout_imitation: the reference of the step being taken, t = (k + 1) dt
+        # as mocap.imitation_eval.rollout_imitation: the reference of the step being taken, t = (k + 1) dt
         policy = self.loaded.policy
         t = torch.full((1,), (self.steps + 1) * self.dt, dtype=self.lib.dtype, device=self.lib.device)
         self.ref = self.lib.frames(self.clip_ids, t)
@@ -245,8 +244,8 @@ class Player:
         self.state = self.sim.step(actions)
 
     def _step_generate(self) -> bool:
-        # as mocap.generation.evaluate_generation: proprioception only, the prior's action as PD targets
-        from mocap.generation import _reference_free
+        # as mocap.generation_eval.evaluate_generation: proprioception only, the prior's action as PD targets
+        from mocap.generation_eval import _reference_free
 
         obs = _reference_free(self.loaded.imitator.observe(self.state, self.ref))
         with torch.no_grad():
@@ -412,7 +411,7 @@ def play(
     ok, why = display_available(environ)
     if not ok:
         raise UserError(f"mocap play needs a display: {why}; {_render_hint(target, clip)}")
-    from mocap.evaluation import build_evaluation_target, load_evaluation_target
+    from mocap.eval_targets import build_evaluation_target, load_evaluation_target
     from mocap.plugins import get_plugins
 
     plugins = get_plugins()
@@ -461,12 +460,13 @@ def render_policy(
 ) -> tuple[Path, str]:
     """``mocap render TARGET``: the rollout ``mocap play`` shows, written to ``out`` (.mp4 / .gif).
 
-    Imitate (default): :func:`mocap.evaluation.record_video` of ``clip`` for ``seconds`` (default:
+    Imitate (default): :func:`mocap.imitation_eval.record_video` of ``clip`` for ``seconds`` (default:
     the clip's duration; looping clips 10 s) with the reference as a ghost. ``generate``: a prior
     sample (:class:`Player` in generate mode, ``seed``) for ``seconds`` (default 10). Frames are
     ``width`` x ``height`` at the control rate. Returns the path and a one-line description."""
     from mocap.errors import UserError
-    from mocap.evaluation import build_evaluation_target, load_evaluation_target, record_video
+    from mocap.eval_targets import build_evaluation_target, load_evaluation_target
+    from mocap.imitation_eval import record_video
     from mocap.plugins import get_plugins
 
     if Path(out).suffix.lower() not in (".mp4", ".gif"):
@@ -516,26 +516,4 @@ def render_policy(
     return path, f"clip {name}, {seconds:.2f} s, reference as a blue ghost"
 
 
-def cmd_play(
-    target: Annotated[
-        Path, typer.Argument(help="a checkpoint (policy.pt, latent.pt), a checkpoint directory (checkpoints/<name>), a run directory or a spec")
-    ],
-    clip: Annotated[Optional[str], typer.Option("--clip", help="clip to start with (default: the first)")] = None,
-    generate: Annotated[bool, typer.Option("--generate", help="start with random motion from the latent prior")] = False,
-    speed: Annotated[float, typer.Option("--speed", help="playback speed (slow motion < 1), nearest of 1/16 .. 4")] = 1.0,
-    noise: Annotated[float, typer.Option("--noise", help="prior noise scale for G / --generate")] = 1.0,
-    seed: Annotated[int, typer.Option("--seed", help="seed of the prior samples")] = 0,
-    horizon: Annotated[float, typer.Option("--horizon", help="seconds per episode for looping clips and prior samples")] = 10.0,
-    motions: Annotated[Optional[str], typer.Option("--motions", help="play clips of this motion source instead (default params)")] = None,
-    imitator_only: Annotated[bool, typer.Option("--imitator-only", help="for a latent space: play the imitator it was distilled from")] = False,
-) -> None:
-    """Watch a policy imitate clips (or sample its latent prior) in MuJoCo's interactive viewer."""
-    from rich.console import Console
-
-    play(
-        target, clip=clip, generate=generate, speed=speed, noise=noise, seed=seed, horizon=horizon,
-        motions=motions, imitator_only=imitator_only, console=Console(stderr=True),
-    )
-
-
-__all__ = ["cmd_play", "KEYS", "SPEEDS", "PlayControls", "Player", "display_available", "draw_reference", "play", "render_policy", "run_viewer"]
+__all__ = ["KEYS", "SPEEDS", "PlayControls", "Player", "display_available", "draw_reference", "play", "render_policy", "run_viewer"]

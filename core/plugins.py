@@ -12,10 +12,16 @@ A plugin that raises on import, fails ``check_pending()`` (a misspelt hook) or r
 registration hook is reported by name in one line (:attr:`PluginSet.failures`) and the others keep
 working. Two plugins registering the same name for the same role is an error that names both
 (:class:`DuplicateRegistration`), raised when that role's registry is used.
+
+A factory may be registered as :func:`lazy` ``("package.module:name")``: its module (and whatever it
+imports, torch included) is imported only when a component is built, so that listing, validating
+and documenting components (``mocap --help``, ``mocap validate``, ``mocap switches``) stay fast.
 """
 
 from __future__ import annotations
 
+import importlib
+import inspect
 import os
 import threading
 from dataclasses import dataclass, field
@@ -60,6 +66,51 @@ def install_hint(kind: str, name: str, provenance: Any) -> str:
     return f"; the file was made with {kind} {name!r} from package {package!r} {version}: install it (pip install {package})"
 
 
+class LazyFactory:
+    """A factory named ``"package.module:attr"`` (``attr`` may be dotted), imported on first use.
+
+    Calling it imports the module and calls the target; :meth:`resolve` returns the target itself
+    (a function or a class). ``inspect.signature`` sees the target's signature.
+    """
+
+    __slots__ = ("target", "_resolved")
+
+    def __init__(self, target: str) -> None:
+        module, sep, attr = target.partition(":")
+        if not (sep and module and attr):
+            raise ValueError(f"lazy factory {target!r}: expected 'package.module:attribute'")
+        self.target = target
+        self._resolved: Callable[..., Any] | None = None
+
+    def resolve(self) -> Callable[..., Any]:
+        """The target (imported now, the first time)."""
+        if self._resolved is None:
+            module, _, attr = self.target.partition(":")
+            obj: Any = importlib.import_module(module)
+            for part in attr.split("."):
+                obj = getattr(obj, part)
+            if not callable(obj):
+                raise TypeError(f"lazy factory {self.target!r} is not callable")
+            self._resolved = obj
+        return self._resolved
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        return self.resolve()(*args, **kwargs)
+
+    @property
+    def __signature__(self) -> inspect.Signature:
+        return inspect.signature(self.resolve())
+
+    def __repr__(self) -> str:
+        return f"lazy({self.target!r})"
+
+
+def lazy(target: str) -> LazyFactory:
+    """A factory for ``register``: ``lazy("mocap.rl.ppo:PPOTrainer")`` imports ``mocap.rl.ppo`` only when
+    the component is built (a plugin module that registers lazily imports nothing heavy)."""
+    return LazyFactory(target)
+
+
 @dataclass(frozen=True)
 class Component:
     """One registered component: ``factory`` builds it from a validated ``params`` instance."""
@@ -80,6 +131,10 @@ class Component:
                 raise ValueError(f"{self.kind} {self.name!r} takes no params")
             return None
         return self.params.model_validate(raw or {})
+
+    def resolved_factory(self) -> Callable[..., Any]:
+        """The factory itself: a :func:`lazy` one imported (for inspecting its signature)."""
+        return self.factory.resolve() if isinstance(self.factory, LazyFactory) else self.factory
 
     def build(self, params: BaseModel | dict[str, Any] | None = None, **kwargs: Any) -> Any:
         if not isinstance(params, BaseModel) and self.params is not None:

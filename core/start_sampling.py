@@ -22,24 +22,12 @@ Choices the paper leaves open are switches with documented defaults: bin width 1
 from __future__ import annotations
 
 import math
-from typing import Any, Literal
+from typing import Any
 
 import torch
-from pydantic import BaseModel, ConfigDict, Field
 from torch import Tensor
 
-
-class StartSamplingParams(BaseModel):
-    """Where in a clip episodes start (module docstring)."""
-
-    model_config = ConfigDict(extra="forbid")
-    mode: Literal["uniform", "adaptive"] = Field(
-        "uniform", description="'uniform' (DeepMimic RSI: uniform in the clip) or 'adaptive' (failure-driven bins, BeyondMimic)"
-    )
-    bin_s: float = Field(1.0, gt=0.0, le=30.0, description="'adaptive': bin width, s")
-    floor: float = Field(0.2, ge=0.0, le=1.0, description="'adaptive': share of the start mass spread uniformly over the bins")
-    decay: float = Field(0.99, gt=0.0, le=1.0, description="'adaptive': a clip's bin counts are multiplied by this before each new failure")
-    lookback: int = Field(1, ge=0, le=10, description="'adaptive': bins before a failure that share its weight")
+from mocap.start_sampling_params import StartSamplingParams
 
 
 class AdaptiveStartSampler:

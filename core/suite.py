@@ -3,9 +3,9 @@
 A comparison (``matrix:``) tabulates each cell's *final* stage metrics. To put imitation, random
 generation and a task side by side for every latent space (the quickstart), the ``eval`` stage runs:
 
-* ``imitation`` (:class:`~mocap.evaluation.ImitationEval`): the latent space's decoder with
+* ``imitation`` (:class:`~mocap.imitation_eval.ImitationEval`): the latent space's decoder with
   ``z`` = encoder mean, or the imitator itself when the cell has no trained latent (``scratch``);
-* ``generation`` (:class:`~mocap.generation.GenerationEval`): rollouts of the latent space's prior;
+* ``generation`` (:class:`~mocap.generation_eval.GenerationEval`): rollouts of the latent space's prior;
   skipped, and said so, for a latent space without one (``scratch``);
 The task stage's own metrics (normalized return, ...) sit next to these in a comparison already
 (``comparison.md`` collects every stage's final metrics). Metrics are prefixed ``imitation/`` and
@@ -17,20 +17,10 @@ from __future__ import annotations
 
 from typing import Any
 
-from mocap.evaluation import ImitationEval, ImitationEvalParams
-from mocap.generation import GenerationEval, GenerationParams
+from mocap.evaluation import EvalSuiteParams
+from mocap.generation_eval import GenerationEval
+from mocap.imitation_eval import ImitationEval
 from mocap.interfaces import StageResult, Trainer
-from pydantic import BaseModel, ConfigDict, Field
-
-
-class EvalSuiteParams(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-    imitation: ImitationEvalParams | None = Field(
-        default_factory=ImitationEvalParams, description="imitation protocol on every clip (None: skip)"
-    )
-    generation: GenerationParams | None = Field(
-        default_factory=GenerationParams, description="random generation from the prior (None: skip; skipped anyway without a prior)"
-    )
 
 
 def has_prior(ctx: Any) -> bool:

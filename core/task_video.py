@@ -2,7 +2,7 @@
 
 The run directory's ``spec.yaml`` and ``stages.json`` name everything: the task, the frozen latent
 space (or ``scratch``) and imitator checkpoints, and the task policy (``policy.pt`` of the task
-stage). :func:`render_task` builds the same :class:`~mocap.hierarchy.TaskEnv` the ``task`` stage
+stage). :func:`render_task` builds the same :class:`~mocap.task_env.TaskEnv` the ``task`` stage
 trained in (one env, the stage's seed unless ``seed`` is given), rolls the task policy out with its
 deterministic action (Gaussian mean, or the argmax code of a discrete head) clipped to the action
 bounds as PPO does, and records env 0 with the simulator's video recorder. Episodes restart as in
@@ -41,7 +41,7 @@ def render_task(
 ) -> tuple[Path, str]:
     """Record the task policy of ``run_dir`` for ``seconds`` into ``out`` (module docstring)."""
     from mocap.errors import UserError
-    from mocap.hierarchy import make_task_env
+    from mocap.task_env import make_task_env
     from mocap.interfaces import Box, StageResult
     from mocap.pipeline import StageContext
     from mocap.plugins import get_plugins

@@ -114,7 +114,7 @@ PULSE_SMALL = {"encoder_hidden": [8], "prior_hidden": [8], "decoder_hidden": [8]
 
 
 def test_eval_latent_with_another_latent_dim_names_both_sides(tmp_path, amp_policy, amp):
-    from mocap.distill import save_latent
+    from mocap.distill_files import save_latent
 
     latent = get_plugins().get("latent", "pulse").build({**PULSE_SMALL, "latent_dim": 4}, skeleton=amp)
     save_latent(tmp_path / "latent.pt", latent)

@@ -136,7 +136,7 @@ def test_committed_checkpoints_name_their_dependencies_by_relative_path():
     resolves next to it (issue 25: pulse_amp named /work/train/...)."""
     import yaml
 
-    from mocap.evaluation import load_evaluation_target
+    from mocap.eval_targets import load_evaluation_target
     from mocap.plugins import get_plugins
 
     for f in sorted(REPO.glob("checkpoints/*/*.pt")):

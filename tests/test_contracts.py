@@ -64,7 +64,8 @@ def test_a_minimal_task_and_simulator_offer_nothing_optional():
 
 
 def test_latent_space_defaults_and_the_scratch_baseline(amp):
-    from mocap.hierarchy import ScratchLatent, ScratchParams
+    from mocap.hierarchy import ScratchParams
+    from mocap.task_env import ScratchLatent
 
     latent = ScratchLatent(ScratchParams(), amp)
     assert isinstance(latent, LatentSpace) and not latent.samples_prior and not latent.decodes_pd_targets

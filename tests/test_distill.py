@@ -25,8 +25,11 @@ import mocap.distill  # noqa: E402
 import mocap_pulse.plugin  # noqa: E402
 from mocap.baselines import PDReplay  # noqa: E402
 from mocap.checkpoint import load_checkpoint  # noqa: E402
-from mocap.distill import DistillParams, DistillTrainer, failure_weights, load_latent_state, mixture_beta  # noqa: E402
-from mocap.evaluation import rollout_imitation  # noqa: E402
+from mocap.distill import DistillParams, mixture_beta  # noqa: E402
+from mocap.distill_files import load_latent_state  # noqa: E402
+from mocap.distill_trainer import DistillTrainer  # noqa: E402
+from mocap.hard_negatives import failure_weights  # noqa: E402
+from mocap.imitation_eval import rollout_imitation  # noqa: E402
 from mocap.interfaces import Box, StageResult  # noqa: E402
 from mocap.latent_imitator import LatentImitator  # noqa: E402
 from mocap.motion.deepmimic import DeepMimicParams, DeepMimicSource  # noqa: E402
@@ -282,7 +285,7 @@ latent:
 def test_pd_target_labels_make_the_student_independent_of_the_reference(amp, walk, teacher_file, tmp_path):
     """``label: pd_targets``: the student learns the teacher's PD targets and steps the simulator
     with its own output, no reference-dependent mapping (what tasks need from a residual teacher)."""
-    from mocap.distill import PDTargetTeacher
+    from mocap.latent_imitator import PDTargetTeacher
 
     ctx = FakeContext(tmp_path, amp, walk, teacher_file)
     teacher = ctx.stage_component("imitator", checkpoint=teacher_file)
@@ -321,7 +324,7 @@ def test_fallen_starts_and_bonus_recovery_episodes_in_distillation(amp, walk):
     """PULSE's code distills with fallen-state starts and recovery episodes (issue 27 item 6): a
     fallen start lies low, gets a recovery window in which tracking failures do not end it, and
     a failure outside the window may go on as a bonus recovery episode."""
-    from mocap.distill import DistillEpisodes
+    from mocap.distill_episodes import DistillEpisodes
     from mocap.fail_states import FailStateParams
 
     lib = MotionLibrary(walk, amp)

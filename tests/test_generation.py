@@ -16,7 +16,8 @@ from hypothesis import strategies as st
 from rich.console import Console
 from test_distill import teacher_file, walk  # noqa: F401  (fixtures)
 
-from mocap.generation import GenerationParams, evaluate_generation, heading_frame, in_start_frame, motion_matching, pairwise_diversity
+from mocap.generation import GenerationParams
+from mocap.generation_eval import evaluate_generation, heading_frame, in_start_frame, motion_matching, pairwise_diversity
 from mocap.rotations import quat_apply, quat_from_axis_angle, quat_mul
 from mocap.testing import invoke
 

@@ -14,7 +14,8 @@ from hypothesis import strategies as st
 from pydantic import BaseModel, ConfigDict
 from test_distill import teacher_file, walk  # noqa: F401  (fixtures)
 
-from mocap.hierarchy import ScratchLatent, ScratchParams, TaskEnv
+from mocap.hierarchy import ScratchParams
+from mocap.task_env import ScratchLatent, TaskEnv
 from mocap.hooks import hookimpl
 from mocap.interfaces import Box, Task
 from mocap.motion.library import MotionLibrary

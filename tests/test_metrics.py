@@ -150,7 +150,7 @@ def test_success_over_a_subset_of_bodies():
     import pytest
 
     from mocap.errors import UserError
-    from mocap.evaluation import success_bodies
+    from mocap.imitation_eval import success_bodies
 
     sim = torch.zeros(5, 1, 4, 3)
     sim[2, 0, 3, 0] = 3.0  # body 3 (the "hand") far off at one frame

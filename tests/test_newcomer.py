@@ -152,7 +152,8 @@ def test_eval_progress_is_printed_when_not_a_terminal(amp):
     from rich.console import Console
 
     from mocap.baselines import PDReplay
-    from mocap.evaluation import ImitationEvalParams, evaluate_imitator
+    from mocap.evaluation import ImitationEvalParams
+    from mocap.imitation_eval import evaluate_imitator
     from mocap.motion.deepmimic import DeepMimicParams, DeepMimicSource
     from mocap.motion.library import MotionLibrary
     from mocap_sim_mujoco.simulator import MujocoSimulator
@@ -171,7 +172,7 @@ def test_a_training_distill_checkpoint_carries_its_label(tmp_path):
     the label of a distill.pt is read from its params, as latent.pt keeps it in extra."""
     import torch
 
-    from mocap.distill import CHECKPOINT_FORMAT, load_latent_state
+    from mocap.distill_files import CHECKPOINT_FORMAT, load_latent_state
 
     path = tmp_path / "distill.pt"
     torch.save({"format": CHECKPOINT_FORMAT, "student": {}, "latent_config": {}, "params": {"label": "pd_targets"}}, path)

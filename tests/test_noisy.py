@@ -99,7 +99,8 @@ def test_observed_library_changes_only_what_the_policy_sees(amp):
     """PD replay of the reference: with the clean library as `observed` the table is unchanged;
     with noisy references the errors (against the clean clip) grow."""
     from mocap.baselines import PDReplay
-    from mocap.evaluation import ImitationEvalParams, evaluate_imitator
+    from mocap.evaluation import ImitationEvalParams
+    from mocap.imitation_eval import evaluate_imitator
     from mocap.metrics import default_metrics
     from mocap.motion.library import MotionLibrary
 

@@ -50,7 +50,7 @@ def policy_file(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def loaded(policy_file):
-    from mocap.evaluation import build_evaluation_target, load_evaluation_target
+    from mocap.eval_targets import build_evaluation_target, load_evaluation_target
 
     plugins = get_plugins()
     return build_evaluation_target(load_evaluation_target(policy_file, plugins), plugins)
@@ -97,8 +97,8 @@ def test_keys_drive_the_state_machine():
 
 
 def test_player_rolls_out_exactly_like_the_evaluation(loaded):
-    """Imitate mode is :func:`mocap.evaluation.rollout_imitation` (what ``render`` records)."""
-    from mocap.evaluation import rollout_imitation
+    """Imitate mode is :func:`mocap.imitation_eval.rollout_imitation` (what ``render`` records)."""
+    from mocap.imitation_eval import rollout_imitation
 
     player = Player(loaded, loaded.make_sim(1), clip="walk")
     for _ in range(6):

@@ -77,7 +77,7 @@ def test_every_built_in_task_factory_takes_the_documented_signature(amp):
     assert {"speed", "reach", "strike", "vr_tracking", "motion_tracking"} <= set(names)
     for name in names:
         comp = plugins.get("task", name)
-        accepts_motions = "motions" in inspect.signature(comp.factory).parameters
+        accepts_motions = "motions" in inspect.signature(comp.resolved_factory()).parameters
         extra = {"motions": lib} if accepts_motions else {}
         task = comp.build(comp.validate_params({}), skeleton=amp, num_envs=2, device="cpu", **extra)
         assert task is not None, name

@@ -361,7 +361,7 @@ def test_params_validation_and_refusals():
 
 
 def test_registry_dims_and_checkpoint_round_trip(amp, tmp_path):
-    from mocap.distill import save_latent
+    from mocap.distill_files import save_latent
     from mocap.testing import use_plugins
 
     with use_plugins(("latent_pulse", mocap_pulse.plugin)) as pset:

@@ -292,7 +292,7 @@ def test_vq_prior_loss_is_the_cross_entropy_of_the_codes_and_generation_modes():
 
 
 def test_vq_checkpoint_round_trip_keeps_the_codebooks(amp, tmp_path):
-    from mocap.distill import save_latent
+    from mocap.distill_files import save_latent
 
     params = PulseParams(
         latent_kind="vq",

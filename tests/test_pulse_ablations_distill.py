@@ -17,7 +17,8 @@ from rich.console import Console
 
 torch.set_num_threads(1)
 
-from mocap.distill import DistillError, DistillParams, DistillTrainer
+from mocap.distill import DistillParams
+from mocap.distill_trainer import DistillError, DistillTrainer
 from mocap.interfaces import Box, StageResult
 from mocap.runlog import MetricsLogger
 from mocap_pulse.latent import PulseLatent, PulseParams, make_pulse

@@ -295,7 +295,7 @@ def test_inbetween_keyframes_reward_mode(amp, punch_lib):
 
 # -------------------------------------------------------------------------------- generation
 def test_generation_task_reward_falls_and_diversity(amp):
-    from mocap.generation import in_start_frame, pairwise_diversity
+    from mocap.generation_eval import in_start_frame, pairwise_diversity
 
     p = GenerationTaskParams(episode_steps=4, diversity_stride=2)
     task = make_generation(p, skeleton=amp, num_envs=3)
@@ -324,7 +324,7 @@ def test_generation_task_reward_falls_and_diversity(amp):
     assert m["episodes"] == 3 and m["fall_rate"] == pytest.approx(2 / 3)
     assert m["time_to_fall_s"] == pytest.approx((2 + 3) / 2 / 30) and m["survival_s"] == pytest.approx((4 + 2 + 3) / 3 / 30)
     assert m["down_at_end"] == pytest.approx(1 / 3) and m["steps"] == 12
-    from mocap.generation import heading_frame
+    from mocap.generation_eval import heading_frame
 
     body = torch.stack(recorded).float()  # (3 frames, N, B, 3)
     origin, heading = heading_frame(state.root_pos.float(), state.root_rot.float())
@@ -345,7 +345,7 @@ def _tiny_pulse(amp):
 
 
 def _env(amp, lib, task, latent, n, seed=0):
-    from mocap.hierarchy import TaskEnv
+    from mocap.task_env import TaskEnv
     from mocap_sim_mujoco.simulator import MujocoParams, MujocoSimulator
 
     sim = MujocoSimulator(MujocoParams.model_validate({"threads": 1, **task.sim_overrides}), skeleton=amp, num_envs=n, seed=0)
@@ -353,7 +353,8 @@ def _env(amp, lib, task, latent, n, seed=0):
 
 
 def test_generation_refuses_scratch_and_ignores_the_policy_action(amp, punch_lib):
-    from mocap.hierarchy import ScratchLatent, ScratchParams
+    from mocap.hierarchy import ScratchParams
+    from mocap.task_env import ScratchLatent
 
     task = make_generation(GenerationTaskParams(episode_steps=5), skeleton=amp, num_envs=2)
     with pytest.raises(ValueError, match="scratch"):
@@ -410,7 +411,8 @@ PAIRS = [(name, latent) for name in sorted(TASKS) for latent in ("scratch", "pul
 
 @pytest.mark.parametrize(("name", "latent"), PAIRS)
 def test_ppo_smoke_run(amp, punch_lib, tmp_path, name, latent):
-    from mocap.hierarchy import ScratchLatent, ScratchParams
+    from mocap.hierarchy import ScratchParams
+    from mocap.task_env import ScratchLatent
 
     lat = ScratchLatent(ScratchParams(), amp) if latent == "scratch" else _tiny_pulse(amp)
     envs = []

@@ -457,7 +457,8 @@ def test_motion_tracking_success_is_full_body(amp, lib):
 
 # ------------------------------------------------------------------------------- the env
 def test_task_env_starts_the_task_on_its_reference_and_resumes_exactly(amp, lib):
-    from mocap.hierarchy import ScratchLatent, ScratchParams, TaskEnv
+    from mocap.hierarchy import ScratchParams
+    from mocap.task_env import ScratchLatent, TaskEnv
     from mocap_sim_mujoco.simulator import MujocoParams, MujocoSimulator
 
     def env():
@@ -490,7 +491,7 @@ def test_task_env_starts_the_task_on_its_reference_and_resumes_exactly(amp, lib)
 
 
 def test_make_task_env_passes_motions_only_to_factories_that_take_them():
-    from mocap.hierarchy import _accepts
+    from mocap.task_env import _accepts
 
     assert _accepts(make_vr_tracking, "motions")
     assert _accepts(lambda params, *, skeleton, num_envs, **_: None, "motions")

@@ -206,7 +206,7 @@ class _Ctx:
 
 
 def test_speed_task_trains_with_ppo_through_a_tiny_vmp(amp, lib, vmp_file, tmp_path):
-    from mocap.hierarchy import TaskEnv
+    from mocap.task_env import TaskEnv
     from mocap.rl.ppo import PPOParams, PPOTrainer
     from mocap_sim_mujoco.simulator import MujocoParams, MujocoSimulator
     from mocap_tasks.speed import SpeedParams, make_speed

@@ -372,7 +372,7 @@ def test_joint_mae_from_trajectories(amp, lib):
 
 # ------------------------------------------------------------------------------------ end to end
 def test_mocap_run_vmp_track_produces_vmp_pt(amp, lib, tmp_path):
-    from mocap.evaluation import rollout_imitation
+    from mocap.imitation_eval import rollout_imitation
     from mocap.testing import invoke
 
     spec = tmp_path / "vmp.yaml"

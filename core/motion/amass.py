@@ -33,14 +33,12 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
-import torch
 from pydantic import ConfigDict, Field
 
-from mocap.interfaces import MotionSource
 from mocap.motion.clip import Clip, MotionDataError
 from mocap.motion.deepmimic import y_up_to_z_up_pos
 from mocap.motion.sources import MotionSet, ReferenceVelocityParams, check_finite, expand_paths, load_each, resample
-from mocap.rotations import quat_conjugate, quat_from_rotvec, quat_mul, quat_normalize
+from mocap.roles import MotionSource
 from mocap.skeleton import Skeleton
 
 #: SMPL joints in the order of AMASS ``poses`` (names as the ``smpl`` humanoid's bodies).
@@ -141,6 +139,10 @@ def load_amass_file(
     check_finite(path, "trans", trans)
     if T < 2:
         raise MotionDataError(f"{path}: clip has {T} frame; at least 2 are needed")
+
+    import torch  # here: a motion source module imports without torch (`mocap validate` builds sources)
+
+    from mocap.rotations import quat_conjugate, quat_from_rotvec, quat_mul, quat_normalize
 
     n_joints = 24 if poses.shape[1] == 72 else NUM_BODY_JOINTS
     q = quat_from_rotvec(torch.from_numpy(poses[:, : 3 * n_joints].reshape(T, n_joints, 3)))

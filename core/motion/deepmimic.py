@@ -34,9 +34,9 @@ from pathlib import Path
 import numpy as np
 from pydantic import ConfigDict, Field, model_validator
 
-from mocap.interfaces import MotionSource
 from mocap.motion.clip import Clip, MotionDataError
 from mocap.motion.sources import MotionSet, ReferenceVelocityParams, check_finite, load_each, resample
+from mocap.roles import MotionSource
 from mocap.skeleton import Skeleton
 
 #: The bundled clip names (file ``humanoid3d_<name>.txt``).

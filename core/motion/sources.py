@@ -17,12 +17,10 @@ from pathlib import Path
 from typing import Callable, Iterable, Literal, Sequence
 
 import numpy as np
-import torch
 from pydantic import BaseModel, ConfigDict, Field
 
-from mocap.interfaces import MotionSource
 from mocap.motion.clip import Clip, MotionDataError
-from mocap.rotations import quat_normalize, quat_slerp
+from mocap.roles import MotionSource
 from mocap.skeleton import Skeleton
 
 
@@ -145,6 +143,10 @@ def resample(
     ``src_times`` (T,) is increasing; ``dst_times`` (T',) lies within ``[src_times[0], src_times[-1]]``
     (values outside are clamped). Shapes: root_pos (T, 3), root_rot (T, 4), joint_rot (T, J, 4).
     """
+    import torch  # here: a motion source module imports without torch (`mocap validate` builds sources)
+
+    from mocap.rotations import quat_normalize, quat_slerp
+
     t = np.clip(np.asarray(dst_times, dtype=np.float64), src_times[0], src_times[-1])
     i0 = np.clip(np.searchsorted(src_times, t, side="right") - 1, 0, len(src_times) - 2)
     span = src_times[i0 + 1] - src_times[i0]

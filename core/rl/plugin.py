@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from mocap.hooks import hookimpl
 from mocap.metric_display import MetricInfo
-from mocap.rl.ppo import PPOParams, PPOTrainer
+from mocap.plugins import lazy
+from mocap.rl.ppo_params import PPOParams
 
 
 #: the episode statistics PPO logs under ``episode/`` (the env's episode dict; tasks add their own)
@@ -20,7 +21,7 @@ EPISODE_METRICS = {
 def register_trainers(register):
     register(
         "ppo",
-        PPOTrainer,
+        lazy("mocap.rl.ppo:PPOTrainer"),
         params=PPOParams,
         description="PPO with GAE on the stage's VecEnv (make_env); checkpoints and resumes in the stage dir, writes policy.pt",
         metrics=EPISODE_METRICS,

@@ -11,7 +11,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from mocap.bounds import EnvCount, LayerWidth, LearningRate, LogStd, ThreadCount
-from mocap.interfaces import Box
+from mocap.roles import Box
 
 
 class PPOParams(BaseModel):

@@ -37,7 +37,7 @@ play so that mastered clips are not forgotten. ``f`` grows from two sources; bef
 * :meth:`ImitationEnv.evaluate_clips` (PHC's evaluation-driven mining): every clip once from
   frame 0 with deterministic actions in a separate simulator; each failed clip adds 1. The
   trainer calls it through :meth:`ImitationEnv.after_iteration` every ``eval_every`` iterations.
-  Failure there is the project evaluator's criterion (:func:`mocap.evaluation.rollout_imitation`:
+  Failure there is the project evaluator's criterion (:func:`mocap.imitation_eval.rollout_imitation`:
   mean body error above ``eval_threshold`` = 0.5 m at any frame, or instability).
 
 **AMP reward** (PHC+; ``params.amp``, :mod:`mocap_phc.amp`): every env keeps the last

@@ -89,7 +89,7 @@ class ClipMining:
         Returns ``success_rate``, ``failed`` (clip names), ``clips`` (name -> ``success``,
         ``tracked_steps``) and ``weights`` (name -> sampling probability after the update).
         """
-        from mocap.evaluation import episode_frames, rollout_imitation
+        from mocap.imitation_eval import episode_frames, rollout_imitation
 
         if self._eval_factory is None:
             raise RuntimeError("evaluate_clips needs an eval_simulator_factory")

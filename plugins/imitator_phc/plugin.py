@@ -8,15 +8,16 @@ from typing import Annotated, Any, Optional
 import typer
 
 from mocap.hooks import hookimpl
-from mocap_phc.imitator import PHCParams, make_phc
-from mocap_phc.pmcp import PMCPParams, make_pmcp
+from mocap.plugins import lazy
+from mocap_phc.phc_params import PHCParams
+from mocap_phc.pmcp_params import PMCPParams
 
 
 @hookimpl
 def register_imitators(register: Any) -> None:
     register(
         "phc",
-        make_phc,
+        lazy("mocap_phc.imitator:make_phc"),
         params=PHCParams,
         description="PHC/PHC+ imitator: proprioception + next-frame imitation goal -> PD targets; "
         "RSI, relaxed early termination, hard-negative clip sampling (paper/code switches)",
@@ -27,7 +28,7 @@ def register_imitators(register: Any) -> None:
 def register_trainers(register: Any) -> None:
     register(
         "pmcp",
-        make_pmcp,
+        lazy("mocap_phc.pmcp:make_pmcp"),
         params=PMCPParams,
         description="PHC's PMCP in one stage: progressive primitives (each on the clips the previous one fails, until "
         "plateau), then a composer over the frozen primitives; writes pmcp.pt (a phc checkpoint) and pmcp.md",
@@ -67,7 +68,7 @@ def register_commands(app: Any) -> None:
         from rich.console import Console
         from rich.progress import Progress
 
-        from mocap.evaluation import build_evaluation_target, load_evaluation_target
+        from mocap.eval_targets import build_evaluation_target, load_evaluation_target
         from mocap.plugins import get_plugins
         from mocap_phc.recovery_eval import RecoveryEvalParams, evaluate_recovery
 

@@ -9,8 +9,8 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from mocap.rl.ppo import PPOParams
-from mocap_phc.recovery import FailStateParams
+from mocap.rl.ppo_params import PPOParams
+from mocap.fail_state_params import FailStateParams
 
 ComposerForm = Literal["weighted_sum", "multiplicative"]
 

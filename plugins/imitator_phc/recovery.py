@@ -23,37 +23,11 @@ from dataclasses import replace
 from typing import Literal
 
 import torch
-from pydantic import BaseModel, ConfigDict, Field
 from torch import Tensor
 
 from mocap.fail_states import FailStateParams, generate_fall_states, moved
+from mocap_phc.phc_params import RecoveryGoalParams
 from mocap.state import HUMANOID_FIELDS, HumanoidState
-
-
-class RecoveryGoalParams(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-    form: Literal["paper", "code"] = Field(
-        "paper", description="'paper': root velocities stay the reference's; 'code' ([C] zero_out_far): all velocities are the simulated ones"
-    )
-    close_distance: float = Field(0.5, gt=0, description="root distance up to which the full imitation goal is used, m ([P] 0.5; [C] 0.25)")
-    far_distance: float = Field(5.0, gt=0, description="the reference root is pulled to at most this distance, m ([P] 5; [C] 3)")
-    reward: Literal["imitation", "point"] = Field(
-        "imitation",
-        description="task reward while far (root farther than close_distance before the step): 'point' = PHC Eq. 4's "
-        "point-goal term r = d_{t-1} - d_t (the decrease of the root-to-reference-root distance, m per control step; "
-        "[P] for the recovery primitive and the composer) or 'imitation' = the imitation reward as everywhere else",
-    )
-    point_form: Literal["paper", "code"] = Field(
-        "paper",
-        description="the point-goal term: 'paper' = d_{t-1} - d_t (PHC Eq. 4); 'code' = 9 min(d_{t-1} - d_t, 1/3) (the "
-        "official code's compute_point_goal_reward: scaled and clipped)",
-    )
-    far_energy_weight: float = Field(
-        0.1,
-        ge=0.0,
-        description="weight of the energy penalty while far with reward 'point' (PHC Eq. 4: 0.5 r^point + 0.5 r^amp + "
-        "0.1 r^energy; [C] keeps the penalty inside the task reward with a smaller coefficient instead); 1 = unchanged",
-    )
 
 
 _FIELDS = HUMANOID_FIELDS

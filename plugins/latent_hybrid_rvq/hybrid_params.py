@@ -7,9 +7,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Literal
 
-from mocap.bounds import LayerWidth
-from mocap.checkpoint import CheckpointError
-from mocap.rl.networks import ACTIVATIONS
+from mocap.bounds import ACTIVATION_NAMES, LayerWidth
+from mocap.errors import CheckpointError
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 Variant = Literal["hybrid", "continuous", "discrete", "discrete_plus", "hybrid_vq"]
@@ -79,7 +78,7 @@ class HybridParams(BaseModel):
     encoder_hidden: list[LayerWidth] = Field(default_factory=lambda: [512, 256], description="posterior MLP hidden sizes ([DEFAULT])")
     prior_hidden: list[LayerWidth] = Field(default_factory=lambda: [512, 256], description="prior MLP hidden sizes ([DEFAULT])")
     decoder_hidden: list[LayerWidth] = Field(default_factory=lambda: [512, 256], description="decoder MLP hidden sizes ([DEFAULT])")
-    activation: str = Field("silu", description="MLP activation ([DEFAULT] SiLU as PULSE): " + ", ".join(sorted(ACTIVATIONS)))
+    activation: str = Field("silu", description="MLP activation ([DEFAULT] SiLU as PULSE): " + ", ".join(sorted(ACTIVATION_NAMES)))
     log_std_bounds: tuple[float, float] = Field((-5.0, 2.0), description="'continuous': clamp of the predicted log σ")
     # ------------------------------------------------------------------------ observations
     goal: Literal["rot", "keypoint"] = Field("rot", description="imitation goal layout of the teacher (sets the goal size)")
@@ -107,8 +106,8 @@ class HybridParams(BaseModel):
 
     @model_validator(mode="after")
     def _check(self) -> HybridParams:
-        if self.activation not in ACTIVATIONS:
-            raise ValueError(f"activation {self.activation!r} unknown; choose one of {sorted(ACTIVATIONS)}")
+        if self.activation not in ACTIVATION_NAMES:
+            raise ValueError(f"activation {self.activation!r} unknown; choose one of {sorted(ACTIVATION_NAMES)}")
         if self.variant in RESIDUAL_VARIANTS and self.task_codebooks > self.num_codebooks:
             raise ValueError(f"task_codebooks ({self.task_codebooks}) exceeds num_codebooks ({self.num_codebooks})")
         if self.variant in SINGLE_VQ_VARIANTS and self.task_codebooks != 1:

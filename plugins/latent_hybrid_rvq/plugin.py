@@ -6,14 +6,15 @@ from __future__ import annotations
 from typing import Any
 
 from mocap.hooks import hookimpl
-from mocap_hybrid_rvq.model import HybridParams, make_hybrid
+from mocap.plugins import lazy
+from mocap_hybrid_rvq.hybrid_params import HybridParams
 
 
 @hookimpl
 def register_latent_spaces(register: Any) -> None:
     register(
         "hybrid_rvq",
-        make_hybrid,
+        lazy("mocap_hybrid_rvq.model:make_hybrid"),
         params=HybridParams,
         description="Hybrid latent (Bae et al. 2025): deterministic prior z_p(s) + residual-VQ of the posterior margin "
         "(8 x 1024 codes, EMA, dead-code reset, quantizer dropout); task policies pick code indices of the first M "

@@ -458,7 +458,7 @@ def make_pulse(
     latent = PulseLatent(params, *pulse_dims(params, skeleton))
     if checkpoint is not None:
         from mocap.checkpoint import CheckpointError, embedded_humanoid
-        from mocap.distill import load_latent_state
+        from mocap.distill_files import load_latent_state
 
         try:
             saved = load_latent_state(Path(checkpoint))

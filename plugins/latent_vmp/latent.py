@@ -18,10 +18,9 @@ tracker is :class:`mocap_vmp.tracking.VmpImitator`.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import torch
-from pydantic import BaseModel, ConfigDict, Field
 from torch import Tensor
 
 from mocap.interfaces import Box, LatentSample, LatentSpace
@@ -37,47 +36,9 @@ from mocap_vmp.features import (
     window_rows,
 )
 from mocap_vmp.vae import MotionVAE
+from mocap_vmp.vmp_params import VmpParams
 
 ARCHITECTURE_KEYS = ("window_half", "latent_dim", "channels", "res_blocks", "downsample", "dilation_growth", "end_effectors")
-
-
-class VmpParams(BaseModel):
-    """VMP stage I (the motion VAE and its features). Tags: [P] paper, [X] our choice (not in the paper)."""
-
-    model_config = ConfigDict(extra="forbid")
-
-    window_half: int = Field(
-        30,
-        ge=1,
-        description="W: windows hold 2W+1 frames [P: W = 30, 61 frames, 1 s at the paper's rate]; frames are the "
-        "clips' own frames (no resampling [X]: clips at different rates give windows of different durations)",
-    )
-    latent_dim: int = Field(64, ge=1, description="d_z [P: 64]")
-    channels: int = Field(
-        48, ge=1, description="conv width [X: the paper gives no widths; 96 reaches its ~0.8 M parameters; 48 is the CPU default]"
-    )
-    res_blocks: int = Field(4, ge=0, description="ResNet blocks in encoder and decoder [P: 4]")
-    downsample: int = Field(2, ge=0, description="stride-2 conv layers before the ResNet blocks [X: not in the paper]")
-    dilation_growth: int = Field(3, ge=1, description="ResBlock i has dilation growth^i [X: Jukebox-style; not in the paper]")
-    end_effectors: list[str] | None = Field(
-        None,
-        description="bodies whose root-relative positions form p [P: hands and feet]; None = the hands and feet among "
-        "the skeleton's end effectors (names containing 'hand' or 'foot')",
-    )
-    std_min: float = Field(
-        1e-6, gt=0, description="floor of the standardization std, for features that never vary in the data [X: not in the paper]"
-    )
-    latent_for_policy: Literal["mean", "sample"] = Field(
-        "mean", description="z_t given to the policy and precomputed per frame: posterior mean or a sample [X: paper silent]"
-    )
-    task_action: Literal["latent", "residual"] = Field(
-        "latent",
-        description="a task policy's action (beyond the paper: VMP only tracks): 'latent' = z itself (prior N(0, I)); "
-        "'residual' = z = the encoding of the current frame held over the window + a (mocap_vmp.task) [X]",
-    )
-    task_action_clip: float | None = Field(
-        None, gt=0, description="bound of the task action space Box(d_z): actions clamped to [-clip, clip]; None = unbounded [X]"
-    )
 
 
 class VmpLatent(LatentSpace):

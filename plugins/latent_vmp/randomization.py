@@ -28,43 +28,11 @@ from typing import Any
 
 import numpy as np
 import torch
-from pydantic import BaseModel, ConfigDict, Field, model_validator
 from torch import Tensor
 
+from mocap_vmp.tracking_params import DomainRandomizationParams, Range
+
 __all__ = ["DomainRandomizationParams", "DomainRandomizer", "default_push_bodies"]
-
-Range = tuple[float, float]
-
-
-def _check_range(name: str, r: Range | None, low: float = 0.0) -> None:
-    if r is not None and not (low <= r[0] <= r[1]):
-        raise ValueError(f"{name} must satisfy {low} <= low <= high, got {r}")
-
-
-class DomainRandomizationParams(BaseModel):
-    """Domain randomization of the tracking env (module docstring); set a part to null to disable it."""
-
-    model_config = ConfigDict(extra="forbid")
-
-    mass_pct: float | None = Field(
-        10.0, ge=0, lt=100, description="eps_m, %: body masses (and inertias) scaled by U[1 - eps, 1 + eps] per body at reset [T1 robot 10; humanoid T1?]"
-    )
-    ground_friction: Range | None = Field((0.5, 1.25), description="ground sliding friction U[lo, hi] per env at reset [P randomized; range X]")
-    push_bodies: list[str] | None = Field(
-        None, description="bodies that get pushed [P: root, head, hands, feet]; None = the root and the bodies named *head*, *hand*, *foot*"
-    )
-    push_interval_s: Range | None = Field((1.0, 5.0), description="time between pushes of an env, s [X]; null = no pushes")
-    push_duration_s: Range = Field((0.1, 0.2), description="how long a push is held, s (at least one control step) [X]")
-    push_force_max_mg: float = Field(0.5, ge=0, description="push force magnitude U[0, this] x total mass x g, N [X]")
-    push_torque_max: float = Field(20.0, ge=0, description="push torque magnitude U[0, this], N m [X]")
-
-    @model_validator(mode="after")
-    def _ranges(self) -> DomainRandomizationParams:
-        _check_range("ground_friction", self.ground_friction, 1e-6)
-        _check_range("push_interval_s", self.push_interval_s, 1e-6)
-        _check_range("push_duration_s", self.push_duration_s)
-        return self
-
 
 def default_push_bodies(skeleton: Any) -> list[str]:
     names = [skeleton.bodies[0].name]

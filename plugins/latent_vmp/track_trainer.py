@@ -24,38 +24,18 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Callable
 
-from pydantic import BaseModel, ConfigDict, Field
 
 from mocap.checkpoint import load_checkpoint, save_checkpoint
 from mocap.interfaces import StageResult, Trainer
-from mocap.rl.ppo import PPOParams, PPOTrainer
-from mocap_vmp.tracking import TRACKER_KEY, VmpTracker, VmpTrackerParams
-from mocap_vmp.trainer import FINAL_NAME, SupervisedParams, SupervisedTrainer
+from mocap.rl.ppo import PPOTrainer
+from mocap_vmp.tracking import TRACKER_KEY, VmpTracker
+from mocap_vmp.trainer import FINAL_NAME, SupervisedTrainer
+from mocap_vmp.vmp_params import VmpTrackParams
 
 FORMAT = "mocap_vmp.vmp/1"
 COMBINED_NAME = "vmp.pt"
 VAE_DIR = "vae"
 TRACKER_DIR = "tracker"
-
-
-class VmpTrackParams(BaseModel):
-    """Both VMP stages: the VAE's training (``vae``), PPO (``ppo``) and the tracking env (``tracker``)."""
-
-    model_config = ConfigDict(extra="forbid")
-
-    vae: SupervisedParams = Field(
-        default_factory=SupervisedParams,
-        description="stage I: the supervised trainer's params",
-    )
-    ppo: PPOParams = Field(
-        default_factory=PPOParams,
-        description="stage II: PPO [P: 3x512 ELU actor and critic, gamma 0.99, lambda 0.95, 5 epochs, clip 0.2, max grad norm 1.0; "
-        "the defaults here are the project's CPU recipe]",
-    )
-    tracker: VmpTrackerParams = Field(
-        default_factory=VmpTrackerParams,
-        description="stage II: conditioning, reward, termination, episodes",
-    )
 
 
 class SubContext:

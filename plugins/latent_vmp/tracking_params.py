@@ -1,5 +1,5 @@
 """VMP stage II parameter models: the tracker's pydantic params (reward weights, env and policy
-interface) and the conditioning table of the ablations (M, M5, M10, L, LM).
+interface, domain randomization) and the conditioning table of the ablations (M, M5, M10, L, LM).
 
 Moved out of :mod:`mocap_vmp.tracking` (re-exported there); the design is described in that
 module's docstring."""
@@ -9,14 +9,46 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
-
-from mocap_vmp.randomization import DomainRandomizationParams
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 Conditioning = Literal["M", "M5", "M10", "L", "LM"]
 
 
 # ------------------------------------------------------------------------------------ params
+# domain randomization (re-exported by mocap_vmp.randomization, whose docstring documents it)
+Range = tuple[float, float]
+
+
+def _check_range(name: str, r: Range | None, low: float = 0.0) -> None:
+    if r is not None and not (low <= r[0] <= r[1]):
+        raise ValueError(f"{name} must satisfy {low} <= low <= high, got {r}")
+
+
+class DomainRandomizationParams(BaseModel):
+    """Domain randomization of the tracking env (module docstring); set a part to null to disable it."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    mass_pct: float | None = Field(
+        10.0, ge=0, lt=100, description="eps_m, %: body masses (and inertias) scaled by U[1 - eps, 1 + eps] per body at reset [T1 robot 10; humanoid T1?]"
+    )
+    ground_friction: Range | None = Field((0.5, 1.25), description="ground sliding friction U[lo, hi] per env at reset [P randomized; range X]")
+    push_bodies: list[str] | None = Field(
+        None, description="bodies that get pushed [P: root, head, hands, feet]; None = the root and the bodies named *head*, *hand*, *foot*"
+    )
+    push_interval_s: Range | None = Field((1.0, 5.0), description="time between pushes of an env, s [X]; null = no pushes")
+    push_duration_s: Range = Field((0.1, 0.2), description="how long a push is held, s (at least one control step) [X]")
+    push_force_max_mg: float = Field(0.5, ge=0, description="push force magnitude U[0, this] x total mass x g, N [X]")
+    push_torque_max: float = Field(20.0, ge=0, description="push torque magnitude U[0, this], N m [X]")
+
+    @model_validator(mode="after")
+    def _ranges(self) -> DomainRandomizationParams:
+        _check_range("ground_friction", self.ground_friction, 1e-6)
+        _check_range("push_interval_s", self.push_interval_s, 1e-6)
+        _check_range("push_duration_s", self.push_duration_s)
+        return self
+
+
 class VmpRewardWeights(BaseModel):
     """Reward weights (Eq. 6-8) [T1, humanoid column; the robot column is h 0, v 2, q 7, alive 30,
     da 1.5, dda 0.45, tau 1e-4]."""

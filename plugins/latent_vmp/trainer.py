@@ -24,40 +24,19 @@ from typing import Any
 
 import numpy as np
 import torch
-from pydantic import BaseModel, ConfigDict, Field
 
 from mocap.checkpoint import load_checkpoint, save_checkpoint
 from mocap.interfaces import StageResult, Trainer
 from mocap_vmp.features import GROUPS, clip_starts, feature_stats
 from mocap_vmp.latent import VmpLatent
 from mocap_vmp.vae import cyclical_beta, kl_divergence, per_frame_errors, reconstruction_loss
+from mocap_vmp.vmp_params import SupervisedParams
 from mocap.rng import rng_state, set_rng_state
 
 CHECKPOINT_FORMAT = "mocap_vmp.supervised/1"
 CHECKPOINT_NAME = "vmp.pt"
 FINAL_NAME = "vae.pt"
 TABLE_NAME = "vmp_reconstruction.md"
-
-
-class SupervisedParams(BaseModel):
-    """VAE training (paper section 3.5-3.6). Tags: [P] paper, [T1] the paper's garbled Table 1, [X] ours."""
-
-    model_config = ConfigDict(extra="forbid")
-
-    num_iterations: int = Field(50_000, ge=1, description="optimizer steps [T1: 50,000 'epochs', read as iterations]")
-    batch_size: int = Field(512, ge=1, description="windows per step [P: 512]")
-    lr: float = Field(3e-3, gt=0, description="RAdam initial learning rate [P: 0.003]")
-    sgdr_t0: int = Field(1000, ge=1, description="SGDR first cycle length, steps [T1: 1000]")
-    sgdr_t_mult: int = Field(5, ge=1, description="SGDR cycle growth factor [T1: 5]")
-    sgdr_eta_min: float = Field(0.0, ge=0, description="SGDR minimum learning rate [X: not given; torch's default 0]")
-    beta: float = Field(0.002, ge=0, description="KL weight beta [P: 0.002]")
-    kl_cycles: int = Field(7, ge=1, description="cyclical KL annealing cycles over the run [T1: 7]")
-    kl_ramp_ratio: float = Field(0.5, ge=0, le=1, description="fraction of each cycle over which beta ramps from 0 [T1: 0.5]")
-    max_grad_norm: float | None = Field(None, gt=0, description="gradient-norm clip; None = off [X: the paper names none]")
-    torch_threads: int | None = Field(1, ge=1, description="torch intra-op threads for this stage (None: keep the process setting)")
-    checkpoint_every: int = Field(500, ge=1, description="steps between checkpoints (also at the end and on Ctrl-C)")
-    print_every: int = Field(100, ge=1, description="steps between progress lines")
-    latent_batch: int = Field(1024, ge=1, description="windows per batch when precomputing the per-frame latents")
 
 
 class SupervisedTrainer(Trainer):

@@ -156,9 +156,29 @@ def _sample(clip: Any, humanoid: str, seconds: float | None, fps: float) -> tupl
     return lib.frames(torch.zeros(n, dtype=torch.long), times), skeleton, n
 
 
+def cmd_play(
+    target: Annotated[
+        Path, typer.Argument(help="a checkpoint (policy.pt, latent.pt), a checkpoint directory (checkpoints/<name>), a run directory or a spec")
+    ],
+    clip: Annotated[Optional[str], typer.Option("--clip", help="clip to start with (default: the first)")] = None,
+    generate: Annotated[bool, typer.Option("--generate", help="start with random motion from the latent prior")] = False,
+    speed: Annotated[float, typer.Option("--speed", help="playback speed (slow motion < 1), nearest of 1/16 .. 4")] = 1.0,
+    noise: Annotated[float, typer.Option("--noise", help="prior noise scale for G / --generate")] = 1.0,
+    seed: Annotated[int, typer.Option("--seed", help="seed of the prior samples")] = 0,
+    horizon: Annotated[float, typer.Option("--horizon", help="seconds per episode for looping clips and prior samples")] = 10.0,
+    motions: Annotated[Optional[str], typer.Option("--motions", help="play clips of this motion source instead (default params)")] = None,
+    imitator_only: Annotated[bool, typer.Option("--imitator-only", help="for a latent space: play the imitator it was distilled from")] = False,
+) -> None:
+    """Watch a policy imitate clips (or sample its latent prior) in MuJoCo's interactive viewer."""
+    from mocap.play import play
+
+    play(
+        target, clip=clip, generate=generate, speed=speed, noise=noise, seed=seed, horizon=horizon,
+        motions=motions, imitator_only=imitator_only, console=Console(stderr=True),
+    )
+
+
 @hookimpl
 def register_commands(app: Any) -> None:
-    from mocap.play import cmd_play
-
     app.command("render")(cmd_render)
     app.command("play")(cmd_play)

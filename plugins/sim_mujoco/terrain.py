@@ -31,12 +31,13 @@ square are clamped to its edge.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
-from pydantic import BaseModel, ConfigDict, Field
 from torch import Tensor
+
+from mocap_sim_mujoco.mujoco_params import TerrainParams
 
 if TYPE_CHECKING:  # pragma: no cover
     import mujoco
@@ -44,28 +45,6 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = ["Terrain", "TerrainParams", "TERRAIN_HFIELD"]
 
 TERRAIN_HFIELD = "terrain"
-
-
-class TerrainParams(BaseModel):
-    """A height-field terrain (module docstring)."""
-
-    model_config = ConfigDict(extra="forbid")
-
-    kind: Literal["flat", "rough", "stairs", "slopes", "obstacles"] = "rough"
-    size: float = Field(10.0, gt=0.5, description="half extent of the square terrain, m")
-    resolution: float = Field(0.1, gt=0.005, description="grid spacing, m")
-    flat_radius: float = Field(1.0, ge=0.0, description="half side of the flat spawn square around the origin, m")
-    amplitude: float = Field(0.05, ge=0.0, description="rough: maximum height, m")
-    smoothing: int = Field(1, ge=1, description="rough: box-filter width in cells (1 = none)")
-    step_height: float = Field(0.1, ge=0.0, description="stairs: rise per step, m")
-    step_width: float = Field(0.4, gt=0.0, description="stairs: depth per step, m")
-    steps_per_flight: int = Field(5, ge=1, description="stairs: steps up before the flight goes down again")
-    slope: float = Field(0.15, ge=0.0, le=2.0, description="slopes: gradient, rise / run")
-    slope_length: float = Field(2.0, gt=0.0, description="slopes: horizontal length of one ramp, m")
-    obstacle_count: int = Field(100, ge=0, description="obstacles: number of blocks")
-    obstacle_size: tuple[float, float] = Field((0.3, 1.0), description="obstacles: side length U[min, max], m")
-    obstacle_height: tuple[float, float] = Field((0.05, 0.3), description="obstacles: height U[min, max], m")
-    seed: int | None = Field(None, description="rough / obstacles: random seed (default: the simulator's seed)")
 
 
 class Terrain:

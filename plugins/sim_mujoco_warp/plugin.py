@@ -9,14 +9,15 @@ from __future__ import annotations
 from typing import Any
 
 from mocap.hooks import hookimpl
-from mocap_sim_mujoco_warp.simulator import MujocoWarpParams, make_simulator
+from mocap.plugins import lazy
+from mocap_sim_mujoco_warp.warp_params import MujocoWarpParams
 
 
 @hookimpl
 def register_simulators(register: Any) -> None:
     register(
         "mujoco_warp",
-        make_simulator,
+        lazy("mocap_sim_mujoco_warp.simulator:make_simulator"),
         params=MujocoWarpParams,
         description="MuJoCo Warp: the mujoco simulator's MJCF stepped as nworld = N worlds on a GPU (or Warp's CPU "
         "device), state as torch tensors; needs pip install 'mocap[warp]'",

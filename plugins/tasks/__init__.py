@@ -14,7 +14,8 @@ Modules:
 * :mod:`mocap_tasks.generation`: roll out a latent space's prior (no reward; fall rate, diversity);
 * :mod:`mocap_tasks.tracking`: follow a library clip through the latent space: ``vr_tracking`` (PULSE,
   head + hands), ``hmd_tracking`` (hybrid-RVQ, head only), ``motion_tracking`` (full body);
-* :mod:`mocap_tasks.plugin`: the entry point registering the three tasks.
+* :mod:`mocap_tasks.task_params`, :mod:`mocap_tasks.tracking_params`: every task's params (torch-free);
+* :mod:`mocap_tasks.plugin`: the entry point registering the tasks.
 
 Every task follows :class:`mocap.interfaces.Task`: ``reset(env_ids, state)`` samples goals with the
 task's seeded ``torch.Generator``; ``observe(state)`` is the goal in the root's heading frame;
@@ -24,9 +25,27 @@ hook (goal changes, counters); ``metrics()`` returns and clears the task metrics
 module. Each parameter that differs between the paper ([P]) and the official code ([CODE]) says so.
 """
 
-from mocap_tasks.reach import ReachParams, ReachTask, make_reach
-from mocap_tasks.speed import SpeedParams, SpeedTask, make_speed
-from mocap_tasks.strike import StrikeParams, StrikeTask, make_strike
+import importlib
+from typing import Any
+
+from mocap_tasks.task_params import ReachParams, SpeedParams, StrikeParams
+
+#: the tasks' classes and factories, imported on first use (importing this package imports no torch)
+_LAZY = {
+    "ReachTask": "mocap_tasks.reach",
+    "make_reach": "mocap_tasks.reach",
+    "SpeedTask": "mocap_tasks.speed",
+    "make_speed": "mocap_tasks.speed",
+    "StrikeTask": "mocap_tasks.strike",
+    "make_strike": "mocap_tasks.strike",
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 __all__ = [
     "ReachParams",

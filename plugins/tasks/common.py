@@ -17,8 +17,8 @@ from mocap.rotations import heading_angle
 from mocap.skeleton import Skeleton
 from mocap.state import SimState
 from mocap.termination import allowed_contact_mask, fallen
-from pydantic import BaseModel, ConfigDict, Field
 from torch import Tensor
+from mocap_tasks.task_params import FallParams
 
 __all__ = [
     "FallParams",
@@ -36,28 +36,6 @@ __all__ = [
 
 #: right-hand body names of the built-in skeletons (``smpl``, ``amp``), tried in order
 RIGHT_HAND_NAMES: tuple[str, ...] = ("R_Hand", "right_hand")
-
-
-class FallParams(BaseModel):
-    """Early termination on falls, shared by every task (PULSE code: contact and height 0.15 m)."""
-
-    model_config = ConfigDict(extra="forbid")
-
-    early_termination: bool = Field(
-        True,
-        description="terminate the episode when the humanoid falls ([P] and [CODE]: on)",
-    )
-    fall_height: float = Field(
-        0.15,
-        ge=0.0,
-        description="a fall is a ground contact of any non-foot body OR the root origin lower than this above the "
-        "ground, m (mocap.termination.fallen). [CODE] (ASE/PULSE compute_humanoid_reset) terminates on a "
-        "non-foot contact AND a non-foot body below 0.15 m; 0 disables the height test",
-    )
-    allowed_contacts: tuple[str, ...] | None = Field(
-        None,
-        description="bodies allowed to touch the ground (default: the skeleton's feet, as the code's contact bodies)",
-    )
 
 
 def resolve_body(

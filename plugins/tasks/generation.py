@@ -3,7 +3,7 @@ task so that the same env, specs and comparison tables hold it next to the goal-
 (PULSE Sec. 4.3 "random generation" and Sec. 5.3; hybrid-RVQ Sec. 6.2).
 
 Action. There is no task policy: :attr:`GenerationTask.prior_rollout` tells the task env
-(:class:`mocap.hierarchy.TaskEnv`) to ignore the policy's action and decode, every control step,
+(:class:`mocap.task_env.TaskEnv`) to ignore the policy's action and decode, every control step,
 ``latent.random_action(obs, prior_noise_scale, generator)`` (PULSE: ``z = mu_p + noise sigma_p eps``;
 hybrid: uniformly random codes of the task codebooks added to the prior). PPO still runs (it learns
 nothing: the reward is 0), so a ``task`` stage with this task is a seeded generation rollout logged
@@ -22,8 +22,8 @@ getting up counts, as :mod:`mocap.generation`); with it on, the shared fall test
 Hook: ``step(state)`` advances the counters and records the body positions for diversity.
 
 Metrics (since the last :meth:`GenerationTask.metrics`), with :mod:`mocap.generation`'s definitions
-and functions (:func:`~mocap.generation.fallen_down`, :func:`~mocap.generation.heading_frame`,
-:func:`~mocap.generation.in_start_frame`, :func:`~mocap.generation.pairwise_diversity`). An *episode*
+and functions (:func:`~mocap.generation_eval.fallen_down`, :func:`~mocap.generation_eval.heading_frame`,
+:func:`~mocap.generation_eval.in_start_frame`, :func:`~mocap.generation_eval.pairwise_diversity`). An *episode*
 finishes when its env is reset:
 
 * ``fall_rate``: fraction of the finished episodes (with at least one step) with a fall at some step
@@ -42,44 +42,15 @@ from __future__ import annotations
 from typing import Any
 
 import torch
-from mocap.generation import (
-    fallen_down,
-    heading_frame,
-    in_start_frame,
-    pairwise_diversity,
-)
+from mocap.generation_eval import fallen_down, heading_frame, in_start_frame, pairwise_diversity
 from mocap.interfaces import Task
 from mocap.skeleton import Skeleton
 from mocap.state import SimState
-from mocap_tasks.common import FallParams, TaskBase, rows
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from mocap_tasks.common import TaskBase, rows
 from torch import Tensor
+from mocap_tasks.task_params import GenerationTaskParams
 
 __all__ = ["GenerationTask", "GenerationTaskParams", "make_generation"]
-
-
-class GenerationTaskParams(BaseModel):
-    """Parameters of the ``generation`` task (module docstring)."""
-
-    model_config = ConfigDict(extra="forbid")
-
-    seed: int = Field(0, description="seed of the task's torch.Generator (unused: the prior noise uses the env's)")
-    noise_scale: float = Field(1.0, ge=0.0, description="prior noise scale (PULSE: sigma_p multiplier; 0 = prior mean)")
-    episode_steps: int = Field(300, ge=1, description="rollout length, control steps (10 s; hybrid-RVQ evaluates 30 s = 900)")
-    fall_height: float = Field(0.15, gt=0.0, description="fall metric: a non-foot body touching the ground below this, m ([CODE] PULSE 0.15)")
-    diversity_steps: int | None = Field(None, ge=1, description="horizon of the diversity trajectories, steps (default: episode_steps)")
-    diversity_stride: int = Field(5, ge=1, description="record body positions every this many steps (6 Hz at 5)")
-    diversity_rollouts: int = Field(64, ge=2, description="at most this many trajectories per metrics() call (pairs grow quadratically)")
-    fall: FallParams = Field(
-        default_factory=lambda: FallParams(early_termination=False),
-        description="termination (default off: rollouts continue after a fall, as mocap.generation)",
-    )
-
-    @model_validator(mode="after")
-    def _horizon(self) -> GenerationTaskParams:
-        if self.diversity_steps is not None and self.diversity_steps > self.episode_steps:
-            raise ValueError(f"diversity_steps ({self.diversity_steps}) must be <= episode_steps ({self.episode_steps})")
-        return self
 
 
 class GenerationTask(TaskBase, Task):

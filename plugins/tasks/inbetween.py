@@ -63,7 +63,7 @@ evaluated); it is *hit* when its error is at most ``success_radius``:
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Any
 
 import torch
 from mocap.interfaces import Task
@@ -77,9 +77,9 @@ from mocap.rotations import (
 )
 from mocap.skeleton import Skeleton
 from mocap.state import HumanoidState, MotionFrames, SimState
-from mocap_tasks.common import FallParams, TaskBase
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from mocap_tasks.common import TaskBase
 from torch import Tensor
+from mocap_tasks.task_params import InbetweenParams
 
 __all__ = [
     "InbetweenParams",
@@ -89,40 +89,6 @@ __all__ = [
     "make_inbetween",
     "time_encoding",
 ]
-
-
-class InbetweenParams(BaseModel):
-    """Parameters of the ``inbetween`` task (module docstring)."""
-
-    model_config = ConfigDict(extra="forbid")
-
-    seed: int = Field(0, description="seed of the task's torch.Generator (keyframe times); a factory `seed` overrides it")
-    sequence_steps: int = Field(120, ge=2, description="window length = episode length, control steps ([P] 4 s = 120)")
-    num_keyframes: int = Field(5, ge=2, description="keyframes including the window's first and last frame ([DEFAULT] 5; [P] 4 or 5)")
-    keyframe: Literal["full_body", "root"] = Field("full_body", description="keyframe content: every body ([P]) or the root only")
-    time_encoding: Literal["add", "concat"] = Field("add", description="time-to-arrival encoding added to g_hat ([P] as printed) or appended")
-    time_encoding_dim: int = Field(16, ge=2, description="'concat': encoding size (even)")
-    reward_target: Literal["trajectory", "keyframes"] = Field(
-        "trajectory", description="'trajectory' = Eq. 14 against the ground truth at every step ([P]); 'keyframes' = against each keyframe at its step only"
-    )
-    weights: tuple[float, float, float, float] = Field((0.1, 0.65, 0.1, 0.15), description="r_root, r_q, r_alpha, r_ee weights ([P] Eq. 14)")
-    scales: tuple[float, float, float, float] = Field((10.0, 2.0, 0.5, 40.0), description="kernel scales of r_root, r_q, r_alpha, r_ee ([P] Eq. 10)")
-    end_effectors: tuple[str, ...] | None = Field(None, description="r_ee bodies (default: names containing 'hand' or 'foot')")
-    termination: Literal["paper", "fall", "both"] = Field("paper", description="'paper' = ground-truth distance ([P]); 'fall'; 'both'")
-    termination_distance: float = Field(0.5, gt=0.0, description="paper termination distance, m ([P] 0.5)")
-    distance_reduce: Literal["max", "mean"] = Field("max", description="'max' = any body ([P]); 'mean' = mean over bodies (PHC/UHC)")
-    success_radius: float = Field(0.2, gt=0.0, description="a keyframe is hit within this mean body error, m ([DEFAULT]; not in the paper)")
-    fall: FallParams = Field(default_factory=FallParams, description="the shared fall test (termination 'fall' / 'both')")
-
-    @model_validator(mode="after")
-    def _ranges(self) -> InbetweenParams:
-        if self.num_keyframes > self.sequence_steps + 1:
-            raise ValueError(f"num_keyframes ({self.num_keyframes}) must be <= sequence_steps + 1 ({self.sequence_steps + 1})")
-        if sum(self.weights) <= 0 or min(self.weights) < 0:
-            raise ValueError(f"weights must be >= 0 with a positive sum, got {self.weights}")
-        if self.time_encoding_dim % 2:
-            raise ValueError("time_encoding_dim must be even")
-        return self
 
 
 def time_encoding(tta: Tensor, dim: int, base: float = 10000.0) -> Tensor:

@@ -6,21 +6,17 @@ from typing import Any
 
 from mocap.hooks import hookimpl
 from mocap.metric_display import MetricInfo
-from mocap_tasks.generation import GenerationTaskParams, make_generation
-from mocap_tasks.inbetween import InbetweenParams, make_inbetween
-from mocap_tasks.point_goal import PointGoalParams, make_point_goal
-from mocap_tasks.reach import ReachParams, make_reach
-from mocap_tasks.terrain import TerrainTaskParams, make_terrain
-from mocap_tasks.speed import SpeedParams, make_speed
-from mocap_tasks.strike import StrikeParams, make_strike
-from mocap_tasks.tracking import (
-    HmdTrackingParams,
-    MotionTrackingParams,
-    VrTrackingParams,
-    make_hmd_tracking,
-    make_motion_tracking,
-    make_vr_tracking,
+from mocap.plugins import lazy
+from mocap_tasks.task_params import (
+    GenerationTaskParams,
+    InbetweenParams,
+    PointGoalParams,
+    ReachParams,
+    SpeedParams,
+    StrikeParams,
+    TerrainTaskParams,
 )
+from mocap_tasks.tracking_params import HmdTrackingParams, MotionTrackingParams, VrTrackingParams
 
 
 #: how reports show the metrics the tasks report (each task's module docstring defines them)
@@ -93,7 +89,7 @@ def _metrics(task: str) -> dict[str, MetricInfo]:
 def register_tasks(register: Any) -> None:
     register(
         "speed",
-        make_speed,
+        lazy("mocap_tasks.speed:make_speed"),
         params=SpeedParams,
         description="move the root at a target speed U[0, 5] m/s along a target direction; "
         "r = exp(-0.25 ((v* - v.d)^2 + 0.1 (v.d_perp)^2)); goal obs 3",
@@ -101,14 +97,14 @@ def register_tasks(register: Any) -> None:
     )
     register(
         "reach",
-        make_reach,
+        lazy("mocap_tasks.reach:make_reach"),
         params=ReachParams,
         description="bring the right hand to a target point in a 2-m box; r = exp(-5 ||p_hand - c||^2) (code: 4); goal obs 3",
         metrics=_metrics("reach"),
     )
     register(
         "strike",
-        make_strike,
+        lazy("mocap_tasks.strike:make_strike"),
         params=StrikeParams,
         description="knock a standing box over with the right hand (simulator target prop); paper r = 1 - up.u_t, "
         "code 0.6 tilt + 0.4 approach, 1 when toppled; goal obs 15",
@@ -117,7 +113,7 @@ def register_tasks(register: Any) -> None:
     # tasks that follow a reference motion of the library (the env passes motions=; mocap_tasks.tracking)
     register(
         "vr_tracking",
-        make_vr_tracking,
+        lazy("mocap_tasks.tracking:make_vr_tracking"),
         params=VrTrackingParams,
         description="PULSE VR 3-point tracking: follow the reference head and hands (goal s^g-vr, 72), full-body "
         "PHC+ imitation reward; metrics success (3 points), mpjpe_g",
@@ -125,7 +121,7 @@ def register_tasks(register: Any) -> None:
     )
     register(
         "hmd_tracking",
-        make_hmd_tracking,
+        lazy("mocap_tasks.tracking:make_hmd_tracking"),
         params=HmdTrackingParams,
         description="Hybrid HMD tracking: follow the reference head (goal 5 x 13 head differences), head reward, "
         "terminate at 1 m; metrics success (head), mpjpe_g",
@@ -133,7 +129,7 @@ def register_tasks(register: Any) -> None:
     )
     register(
         "motion_tracking",
-        make_motion_tracking,
+        lazy("mocap_tasks.tracking:make_motion_tracking"),
         params=MotionTrackingParams,
         description="full-body imitation through the latent space: the imitator's goal, PHC imitation reward; "
         "metrics success, mpjpe_g",
@@ -142,7 +138,7 @@ def register_tasks(register: Any) -> None:
     # terrain, point goal, in-betweening, generation (mocap_tasks.terrain / point_goal / inbetween / generation)
     register(
         "terrain",
-        make_terrain,
+        lazy("mocap_tasks.terrain:make_terrain"),
         params=TerrainTaskParams,
         description="PULSE/PACER: follow a 2-D trajectory over a height-field terrain (stairs, slopes, rough, obstacles); "
         "r = exp(-2 ||p - tau||) (code: squared) + energy; goal obs 20 trajectory + 32 x 32 height map",
@@ -150,7 +146,7 @@ def register_tasks(register: Any) -> None:
     )
     register(
         "point_goal",
-        make_point_goal,
+        lazy("mocap_tasks.point_goal:make_point_goal"),
         params=PointGoalParams,
         description="Hybrid-RVQ point-goal navigation: reach a 2-D point within 10 m, new every 4 s; "
         "r = 0.7 exp(-0.5 d^2) + 0.3 exp(-max(0, 1 - v.d_hat)^2), 1 on arrival; goal obs 2",
@@ -158,7 +154,7 @@ def register_tasks(register: Any) -> None:
     )
     register(
         "inbetween",
-        make_inbetween,
+        lazy("mocap_tasks.inbetween:make_inbetween"),
         params=InbetweenParams,
         description="Hybrid-RVQ motion in-betweening: reach library keyframes at irregular intervals in a 4-s window; "
         "r = 0.1 r_root + 0.65 r_q + 0.1 r_alpha + 0.15 r_ee; goal obs 2 J 7 (+ time to arrival)",
@@ -166,7 +162,7 @@ def register_tasks(register: Any) -> None:
     )
     register(
         "generation",
-        make_generation,
+        lazy("mocap_tasks.generation:make_generation"),
         params=GenerationTaskParams,
         description="unconditional generation: the latent prior is rolled out (task action ignored, reward 0; not "
         "with scratch); metrics fall rate, diversity",

@@ -49,55 +49,19 @@ from mocap.observations import world_to_heading
 from mocap.skeleton import Skeleton
 from mocap.state import SimState
 from mocap_tasks.common import (
-    FallParams,
     GoalBookkeeping,
     TaskBase,
     horizontal_unit,
     resolve_body,
     rows,
 )
-from pydantic import BaseModel, ConfigDict, Field, model_validator
 from torch import Tensor
+from mocap_tasks.task_params import PointGoalParams
 
 __all__ = ["HEAD_NAMES", "PointGoalParams", "PointGoalTask", "make_point_goal", "point_goal_reward"]
 
 #: head body names of the built-in skeletons (``amp``, ``smpl``), tried in order
 HEAD_NAMES: tuple[str, ...] = ("head", "Head")
-
-
-class PointGoalParams(BaseModel):
-    """Parameters of the ``point_goal`` task (module docstring)."""
-
-    model_config = ConfigDict(extra="forbid")
-
-    seed: int = Field(0, description="seed of the task's torch.Generator (targets); a factory `seed` argument overrides it")
-    radius: float = Field(10.0, gt=0.0, description="targets uniform in the disc of this radius around the start xy, m ([P] 10 m)")
-    change_steps: int = Field(120, ge=1, description="a new target every this many control steps ([P] 4 s = 120 at 30 Hz)")
-    episode_steps: int = Field(240, ge=1, description="episode length, control steps ([P] at most 8 s = 240)")
-    pos_weight: float = Field(0.7, ge=0.0, description="weight of r_pos ([P] Eq. 16: 0.7)")
-    speed_weight: float = Field(0.3, ge=0.0, description="weight of r_speed ([P] Eq. 16: 0.3)")
-    pos_scale: float = Field(0.5, gt=0.0, description="r_pos = exp(-pos_scale ||p - t||^2) ([P] 0.5)")
-    target_speed: float = Field(1.0, ge=0.0, description="u in r_speed = exp(-max(0, u - <v, d>)^2), m/s ([P] 1)")
-    direction: Literal["toward_target", "paper"] = Field(
-        "toward_target",
-        description="d in r_speed: 'toward_target' = (t - p) / ||t - p|| (our fix of Eq. 16's sign); 'paper' = (p - t) / ||p - t|| "
-        "as printed, pointing away from the target",
-    )
-    arrive_radius: float = Field(
-        0.5, ge=0.0, description="r = 1 within this ground distance of the target, m ([P] 'maximum value once arrived'; radius [DEFAULT])"
-    )
-    termination: Literal["paper", "fall", "both"] = Field(
-        "paper", description="'paper' = head below head_height ([P]); 'fall' = the shared fall test (fall params); 'both'"
-    )
-    head_height: float = Field(0.5, ge=0.0, description="paper termination: head origin below this height, m ([P] 0.5)")
-    head: str | None = Field(None, description="the head body (default: head / Head)")
-    fall: FallParams = Field(default_factory=FallParams, description="the shared fall test (termination 'fall' / 'both')")
-
-    @model_validator(mode="after")
-    def _weights(self) -> PointGoalParams:
-        if self.pos_weight + self.speed_weight <= 0:
-            raise ValueError("pos_weight + speed_weight must be > 0")
-        return self
 
 
 def point_goal_reward(

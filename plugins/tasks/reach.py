@@ -39,77 +39,18 @@ when it is resampled or its env is reset; it is *reached* at the first reward co
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Any
 
 import torch
 from mocap.interfaces import Task
 from mocap.observations import world_to_heading
 from mocap.skeleton import Skeleton
 from mocap.state import SimState
-from mocap_tasks.common import FallParams, GoalBookkeeping, TaskBase, resolve_body, rows
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from mocap_tasks.common import GoalBookkeeping, TaskBase, resolve_body, rows
 from torch import Tensor
+from mocap_tasks.task_params import ReachParams
 
 __all__ = ["ReachParams", "ReachTask", "make_reach", "reach_reward"]
-
-
-class ReachParams(BaseModel):
-    """Parameters of the ``reach`` task (module docstring)."""
-
-    model_config = ConfigDict(extra="forbid")
-
-    seed: int = Field(
-        0,
-        description="seed of the task's torch.Generator (target sampling); a factory `seed` argument overrides it",
-    )
-    body: str | None = Field(
-        None,
-        description="the reaching body (default: the right hand, R_Hand / right_hand) ([P] right hand)",
-    )
-    coefficient: float = Field(
-        5.0,
-        gt=0.0,
-        description="r = exp(-coefficient * ||p_hand - c||^2): [P] 5 (App. C), [CODE] 4 (pos_err_scale)",
-    )
-    xy_range: float = Field(
-        1.0,
-        ge=0.0,
-        description="target xy = anchor xy + U[-xy_range, xy_range]^2, m ([P] 2-m box: 1; [CODE] tarDistMax 1.0)",
-    )
-    height_range: tuple[float, float] = Field(
-        (0.0, 2.0),
-        description="target height U[min, max], m: [P] 2-m box centred at z = 1 -> (0, 2); [CODE] tarHeightMin/Max (0.2, 2.0)",
-    )
-    anchor: Literal["initial_root", "current_root"] = Field(
-        "initial_root",
-        description="centre of the sampling box: the root xy at the episode start ([CODE]: root xy zeroed at reset, "
-        "targets sampled around the world origin, also when resampled mid-episode) or the root xy when sampling "
-        "([P] 'within 1 meter of the humanoid')",
-    )
-    change_steps: tuple[int, int] = Field(
-        (50, 100),
-        description="a new target after U[min, max) control steps ([CODE] tarChangeStepsMin/Max 50, 100; [P] not stated)",
-    )
-    success_radius: float = Field(
-        0.1,
-        gt=0.0,
-        description="a goal counts as reached within this hand-target distance, m (metrics only; [DEFAULT], not in the papers)",
-    )
-    termination: FallParams = Field(
-        default_factory=FallParams, description="fall termination"
-    )
-
-    @model_validator(mode="after")
-    def _ranges(self) -> ReachParams:
-        if self.height_range[0] > self.height_range[1]:
-            raise ValueError(
-                f"height_range must be min <= max, got {self.height_range}"
-            )
-        if self.change_steps[0] < 1 or self.change_steps[0] > self.change_steps[1]:
-            raise ValueError(
-                f"change_steps must be 1 <= min <= max, got {self.change_steps}"
-            )
-        return self
 
 
 def reach_reward(hand_pos: Tensor, target: Tensor, coefficient: float = 5.0) -> Tensor:

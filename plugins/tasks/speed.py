@@ -42,7 +42,7 @@ Metrics (over the control steps whose reward was computed since the last :meth:`
 from __future__ import annotations
 
 import math
-from typing import Any, Literal
+from typing import Any
 
 import torch
 from mocap.interfaces import Task
@@ -50,75 +50,15 @@ from mocap.observations import world_to_heading
 from mocap.skeleton import Skeleton
 from mocap.state import SimState
 from mocap_tasks.common import (
-    FallParams,
     TaskBase,
     angle_between_2d,
     root_heading,
     rows,
 )
-from pydantic import BaseModel, ConfigDict, Field, model_validator
 from torch import Tensor
+from mocap_tasks.task_params import SpeedParams
 
 __all__ = ["SpeedParams", "SpeedTask", "make_speed", "speed_reward"]
-
-
-class SpeedParams(BaseModel):
-    """Parameters of the ``speed`` task (module docstring)."""
-
-    model_config = ConfigDict(extra="forbid")
-
-    seed: int = Field(
-        0,
-        description="seed of the task's torch.Generator (goal sampling); a factory `seed` argument overrides it",
-    )
-    speed_range: tuple[float, float] = Field(
-        (0.0, 5.0),
-        description="target speed v* ~ U[min, max], m/s ([P] and [CODE]: U[0, 5], about the fastest AMASS running)",
-    )
-    change_steps: tuple[int, int] = Field(
-        (100, 200),
-        description="the goal is resampled after U[min, max) control steps ([CODE] speedChangeStepsMin/Max 100, 200; "
-        "[P] not stated); min = max: a fixed period",
-    )
-    direction: Literal["initial_heading", "world_x", "random"] = Field(
-        "initial_heading",
-        description="target direction d: 'initial_heading' = the root's facing at reset (equivalent to [CODE], which "
-        "uses world +x and turns every initial state to face +x); 'world_x' = world +x ([CODE] literally; the env must "
-        "face +x at reset for the same task); 'random' = uniform angle, resampled with the speed (ASE heading-style). "
-        "[P]: 'target direction d_t', speed 'along x'",
-    )
-    velocity: Literal["root_lin_vel", "finite_difference"] = Field(
-        "root_lin_vel",
-        description="root velocity in the reward: 'root_lin_vel' = SimState.root_lin_vel ([P] 'the root velocity'); "
-        "'finite_difference' = (root_pos - root_pos one control step earlier) / dt ([CODE] compute_speed_reward; "
-        "needs the step() hook)",
-    )
-    scale: float = Field(
-        0.25,
-        gt=0.0,
-        description="r = exp(-scale * (along-error^2 + tangent_weight * tangent^2)) ([CODE] vel_err_scale 0.25, ASE). "
-        "[P] prints r = abs(v_t - v^0_t), which grows with the error (a typo), so the code's form is used",
-    )
-    tangent_weight: float = Field(
-        0.1,
-        ge=0.0,
-        description="weight of the squared tangential speed ([CODE] tangent_err_w 0.1)",
-    )
-    termination: FallParams = Field(
-        default_factory=FallParams, description="fall termination"
-    )
-
-    @model_validator(mode="after")
-    def _ranges(self) -> SpeedParams:
-        if self.speed_range[0] > self.speed_range[1] or self.speed_range[0] < 0:
-            raise ValueError(
-                f"speed_range must be 0 <= min <= max, got {self.speed_range}"
-            )
-        if self.change_steps[0] < 1 or self.change_steps[0] > self.change_steps[1]:
-            raise ValueError(
-                f"change_steps must be 1 <= min <= max, got {self.change_steps}"
-            )
-        return self
 
 
 def speed_reward(

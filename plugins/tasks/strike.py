@@ -56,20 +56,19 @@ from typing import Any, Literal
 
 import torch
 from mocap.interfaces import Task
-from mocap.observations import SixD, rotation_sixd, world_to_heading
+from mocap.observations import rotation_sixd, world_to_heading
 from mocap.rotations import heading_quat_inv, quat_mul
 from mocap.skeleton import Skeleton
 from mocap.state import SimState
 from mocap_tasks.common import (
-    FallParams,
     TaskBase,
     horizontal_unit,
     quat_from_yaw,
     resolve_body,
     rows,
 )
-from pydantic import BaseModel, ConfigDict, Field, model_validator
 from torch import Tensor
+from mocap_tasks.task_params import StrikeParams
 
 __all__ = [
     "StrikeParams",
@@ -79,113 +78,6 @@ __all__ = [
     "strike_reward_paper",
     "up_dot",
 ]
-
-
-class StrikeParams(BaseModel):
-    """Parameters of the ``strike`` task (module docstring)."""
-
-    model_config = ConfigDict(extra="forbid")
-
-    seed: int = Field(
-        0,
-        description="seed of the task's torch.Generator (box placement); a factory `seed` argument overrides it",
-    )
-    reward: Literal["code", "paper"] = Field(
-        "code",
-        description="'paper' = [P] r = 1 - u_up . u_t in [0, 2] (max_reward 2); 'code' = [CODE] 0.6 max(0, 1 - u_up . u_t) "
-        "+ 0.4 r_vel, and 1 once u_up . u_t < success_up_dot, in [0, 1]",
-    )
-    rot_weight: float = Field(
-        0.6,
-        ge=0.0,
-        description="code reward: weight of the tilt term ([CODE] tar_rot_w 0.6)",
-    )
-    vel_weight: float = Field(
-        0.4,
-        ge=0.0,
-        description="code reward: weight of the approach term ([CODE] vel_reward_w 0.4)",
-    )
-    toward_speed: float = Field(
-        1.0,
-        gt=0.0,
-        description="code reward: target approach speed, m/s ([CODE] tar_speed 1.0)",
-    )
-    vel_scale: float = Field(
-        4.0,
-        gt=0.0,
-        description="code reward: r_vel = exp(-vel_scale * max(0, toward_speed - v)^2) ([CODE] 4.0)",
-    )
-    success_up_dot: float = Field(
-        0.2,
-        ge=-1.0,
-        le=1.0,
-        description="the box is knocked over when u_up . u_t < this ([CODE] succ: tar_rot_err < 0.2); code reward 1 then",
-    )
-    velocity: Literal["root_lin_vel", "finite_difference"] = Field(
-        "finite_difference",
-        description="root velocity of the code reward: SimState.root_lin_vel, or (root_pos - previous root_pos) / dt "
-        "([CODE] compute_strike_reward; needs the step() hook)",
-    )
-    distance: tuple[float, float] = Field(
-        (1.5, 5.0),
-        description="box distance from the root U[min, max], m ([P] 1.5-5 m; [CODE] tar_dist_min/max 0.5, 10)",
-    )
-    near_prob: float = Field(
-        0.0,
-        ge=0.0,
-        le=1.0,
-        description="probability of a 'near' box at U[distance[0], near_max] ([P] none: 0; [CODE] near_prob 0.5)",
-    )
-    near_max: float = Field(
-        1.5,
-        gt=0.0,
-        description="maximum distance of a 'near' box, m ([CODE] near_dist 1.5)",
-    )
-    random_yaw: bool = Field(
-        True, description="uniform yaw of the box at reset ([CODE] yes; [P] not stated)"
-    )
-    half_size: tuple[float, float, float] = Field(
-        (0.2, 0.2, 0.9),
-        description="box half extents, m; it stands with its centre at half_size[2] ([CODE] centre height 0.9 m; the "
-        "horizontal size is [DEFAULT])",
-    )
-    density: float = Field(
-        30.0, gt=0.0, description="box density, kg/m^3 ([CODE] asset density 30)"
-    )
-    friction: float = Field(
-        0.9, gt=0.0, description="box friction coefficient ([DEFAULT], the simulator's)"
-    )
-    strike_bodies: tuple[str, ...] | None = Field(
-        None,
-        description="bodies allowed to touch the box: default the right hand only ([P] 'any body other than the right "
-        "hand'); [CODE] strikeBodyNames R_Hand, R_Wrist, R_Elbow (smpl; right_hand, right_lower_arm on amp)",
-    )
-    illegal_contact: Literal["paper", "code", "off"] = Field(
-        "paper",
-        description="terminate on a forbidden box contact: 'paper' = any non-strike body touches the box ([P]); 'code' = "
-        "a non-strike, non-foot body touching it with a contact-force component > contact_force_threshold ([CODE]); 'off'",
-    )
-    contact_force_threshold: float = Field(
-        50.0, ge=0.0, description="contact force for the 'code' rule, N ([CODE] 50)"
-    )
-    sixd: SixD = Field(
-        "tan_norm",
-        description="6-D rotation of the box orientation ([CODE] quat_to_tan_norm; [P] unspecified)",
-    )
-    termination: FallParams = Field(
-        default_factory=FallParams,
-        description="fall termination (ground contacts only)",
-    )
-
-    @model_validator(mode="after")
-    def _ranges(self) -> StrikeParams:
-        if not 0.0 < self.distance[0] <= self.distance[1]:
-            raise ValueError(f"distance must be 0 < min <= max, got {self.distance}")
-        if self.near_prob > 0 and self.near_max < self.distance[0]:
-            raise ValueError(
-                f"near_max ({self.near_max}) must be >= distance[0] ({self.distance[0]})"
-            )
-        return self
 
 
 def up_dot(target_rot: Tensor) -> Tensor:

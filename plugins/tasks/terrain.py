@@ -65,61 +65,12 @@ from mocap.observations import world_to_heading
 from mocap.skeleton import Skeleton
 from mocap.state import HumanoidState, SimState
 from mocap.imitation_rewards import energy_penalty
-from mocap_sim_mujoco.terrain import TerrainParams, height_map
-from mocap_tasks.common import FallParams, TaskBase, root_heading, rows
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from mocap_sim_mujoco.terrain import height_map
+from mocap_tasks.common import TaskBase, root_heading, rows
 from torch import Tensor
+from mocap_tasks.task_params import TerrainTaskParams
 
 __all__ = ["TerrainTask", "TerrainTaskParams", "make_terrain", "sample_trajectories", "terrain_reward", "trajectory_at"]
-
-
-class TerrainTaskParams(BaseModel):
-    """Parameters of the ``terrain`` task (module docstring)."""
-
-    model_config = ConfigDict(extra="forbid")
-
-    seed: int = Field(0, description="seed of the task's torch.Generator (trajectories, spawn points); a factory `seed` overrides it")
-    terrain: TerrainParams = Field(
-        default_factory=lambda: TerrainParams(kind="stairs", size=20.0),
-        description="the simulator's height field (sim_overrides): kind flat / rough / stairs / slopes / obstacles; "
-        "[CODE] PACER maps are 20 x 20 m per terrain",
-    )
-    episode_steps: int = Field(300, ge=2, description="episode length, control steps ([CODE] PULSE 300 = 10 s)")
-    spawn_radius: float = Field(0.5, ge=0.0, description="roots start uniformly in [-r, r]^2 around the origin, m (<= terrain.flat_radius)")
-    num_verts: int = Field(101, ge=2, description="trajectory vertices over the episode ([CODE] PACER 101)")
-    speed_range: tuple[float, float] = Field((0.0, 3.0), description="trajectory speed range, m/s ([P] [0, 3])")
-    accel_max: float = Field(2.0, ge=0.0, description="maximum |speed change| per second, m/s^2 ([P] 2)")
-    dtheta_max: float = Field(2.0, ge=0.0, description="maximum heading change per second outside sharp turns, rad/s ([CODE] 2.0)")
-    sharp_turn_prob: float = Field(0.02, ge=0.0, le=1.0, description="probability of a sharp turn U[-pi, pi] per segment ([CODE] 0.02)")
-    bounds_margin: float = Field(1.0, ge=0.0, description="vertices are clamped this far inside the terrain square, m")
-    num_samples: int = Field(10, ge=1, description="trajectory samples in the observation ([P] [CODE] 10)")
-    sample_spacing: float = Field(0.5, gt=0.0, description="time between observed samples, s ([CODE] 0.5: a 5-s horizon)")
-    map_shape: tuple[int, int] = Field((32, 32), description="height-map grid H x W ([P] 32 x 32)")
-    map_size: float = Field(2.0, gt=0.0, description="side of the height-map square, m ([P] 2 m)")
-    distance: Literal["paper", "code"] = Field(
-        "paper", description="tracking error e: 'paper' = ||p - tau|| ([P] exp(-2 ||.||)); 'code' = ||p - tau||^2 ([CODE] PACER)"
-    )
-    pos_scale: float = Field(2.0, gt=0.0, description="r_track = exp(-pos_scale e) ([P] [CODE] 2)")
-    energy_weight: float = Field(0.0005, ge=0.0, description="energy coefficient ([P] 0.0005; 0 disables)")
-    energy_form: Literal["paper", "code"] = Field(
-        "code",
-        description="'paper' = -c sum (tau qdot)^2 ([P]); 'code' = -c sum |tau qdot| ([CODE] PHC power reward, zero for the "
-        "first 3 steps; default: the squared form measured ~-1e2 per step on a falling amp humanoid, dwarfing the (0, 1] "
-        "tracking term)",
-    )
-    fail_distance: float | None = Field(4.0, gt=0.0, description="terminate when the root is farther from tau(t), m ([DEFAULT]; None: never)")
-    termination: FallParams = Field(default_factory=FallParams, description="fall termination")
-
-    @model_validator(mode="after")
-    def _ranges(self) -> TerrainTaskParams:
-        lo, hi = self.speed_range
-        if not 0.0 <= lo <= hi:
-            raise ValueError(f"speed_range must be 0 <= min <= max, got {self.speed_range}")
-        if min(self.map_shape) < 1:
-            raise ValueError(f"map_shape must be positive, got {self.map_shape}")
-        if self.bounds_margin >= self.terrain.size:
-            raise ValueError(f"bounds_margin ({self.bounds_margin}) must be smaller than terrain.size ({self.terrain.size})")
-        return self
 
 
 def sample_trajectories(

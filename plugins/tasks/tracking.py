@@ -4,7 +4,7 @@ full-body imitation goal of the imitator).
 
 Episode (all three).
 
-* **Start**: reference-state initialization. The task env (:class:`mocap.hierarchy.TaskEnv`) draws a
+* **Start**: reference-state initialization. The task env (:class:`mocap.task_env.TaskEnv`) draws a
   (clip, time) with the library's weights, resets the humanoid to that reference frame and tells the
   task through ``reference_start(env_ids, clip_ids, times)``; the task then follows that clip from
   that time, one control step ``dt`` per step. Used outside the env (no ``reference_start`` before

@@ -8,17 +8,12 @@ from collections.abc import Sequence
 from typing import Literal
 
 import torch
-from mocap.imitation_rewards import DEFAULT_SCALES, DEFAULT_WEIGHTS, TERMS, ImitationReward, RewardForm
+from mocap.imitation_rewards import TERMS, ImitationReward, RewardForm
 from mocap.rotations import heading_quat_inv, quat_angle, quat_apply, quat_conjugate, quat_mul
 from mocap.state import HumanoidState
+from mocap_tasks.tracking_params import HMD_SCALES, HMD_WEIGHTS, PHC_SCALES, PHC_WEIGHTS
 from torch import Tensor
 
-#: PHC imitation reward: (position, rotation, linear velocity, angular velocity)
-PHC_WEIGHTS: tuple[float, float, float, float] = DEFAULT_WEIGHTS
-PHC_SCALES: tuple[float, float, float, float] = DEFAULT_SCALES
-#: Hybrid HMD head reward ([DEFAULT], our choice: App. C.2 gives no formula): (position, rotation, linear velocity, angular velocity)
-HMD_WEIGHTS: tuple[float, float, float, float] = (0.4, 0.3, 0.15, 0.15)
-HMD_SCALES: tuple[float, float, float, float] = (40.0, 2.0, 0.5, 0.1)
 
 
 # ------------------------------------------------------------------------------ pure functions

@@ -5,10 +5,16 @@ from __future__ import annotations
 
 from typing import Literal
 
-from mocap.imitation_rewards import RewardForm
-from mocap_tasks.common import FallParams
-from mocap_tasks.tracking_functions import HMD_SCALES, HMD_WEIGHTS, PHC_SCALES, PHC_WEIGHTS
+from mocap.imitation_reward_params import DEFAULT_SCALES, DEFAULT_WEIGHTS, RewardForm
+from mocap_tasks.task_params import FallParams
 from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+#: PHC imitation reward (re-exported by :mod:`mocap_tasks.tracking_functions`): (position, rotation, linear velocity, angular velocity)
+PHC_WEIGHTS: tuple[float, float, float, float] = DEFAULT_WEIGHTS
+PHC_SCALES: tuple[float, float, float, float] = DEFAULT_SCALES
+#: Hybrid HMD head reward ([DEFAULT], our choice: App. C.2 gives no formula): (position, rotation, linear velocity, angular velocity)
+HMD_WEIGHTS: tuple[float, float, float, float] = (0.4, 0.3, 0.15, 0.15)
+HMD_SCALES: tuple[float, float, float, float] = (40.0, 2.0, 0.5, 0.1)
 
 
 # ---------------------------------------------------------------------------------- params

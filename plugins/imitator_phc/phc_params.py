@@ -1,0 +1,219 @@
+"""The params of the ``phc`` imitator (:class:`PHCParams`, re-exported by :mod:`mocap_phc.imitator`, whose
+docstring explains the defaults) and of its fail-state recovery goal (:class:`RecoveryGoalParams`,
+re-exported by :mod:`mocap_phc.recovery`, which documents it). Torch-free, so that validating a spec
+(``mocap validate``) and listing the plugins import no torch.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from mocap.fail_state_params import FailStateParams
+from mocap.imitation_reward_params import DEFAULT_SCALES, DEFAULT_WEIGHTS
+from mocap.noisy import NoiseLevel
+from mocap.start_sampling_params import StartSamplingParams
+
+if TYPE_CHECKING:  # pragma: no cover
+    from mocap.skeleton import Skeleton
+    from mocap_phc.env import ActionMap, PHCObservation
+
+
+class RecoveryGoalParams(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    form: Literal["paper", "code"] = Field(
+        "paper", description="'paper': root velocities stay the reference's; 'code' ([C] zero_out_far): all velocities are the simulated ones"
+    )
+    close_distance: float = Field(0.5, gt=0, description="root distance up to which the full imitation goal is used, m ([P] 0.5; [C] 0.25)")
+    far_distance: float = Field(5.0, gt=0, description="the reference root is pulled to at most this distance, m ([P] 5; [C] 3)")
+    reward: Literal["imitation", "point"] = Field(
+        "imitation",
+        description="task reward while far (root farther than close_distance before the step): 'point' = PHC Eq. 4's "
+        "point-goal term r = d_{t-1} - d_t (the decrease of the root-to-reference-root distance, m per control step; "
+        "[P] for the recovery primitive and the composer) or 'imitation' = the imitation reward as everywhere else",
+    )
+    point_form: Literal["paper", "code"] = Field(
+        "paper",
+        description="the point-goal term: 'paper' = d_{t-1} - d_t (PHC Eq. 4); 'code' = 9 min(d_{t-1} - d_t, 1/3) (the "
+        "official code's compute_point_goal_reward: scaled and clipped)",
+    )
+    far_energy_weight: float = Field(
+        0.1,
+        ge=0.0,
+        description="weight of the energy penalty while far with reward 'point' (PHC Eq. 4: 0.5 r^point + 0.5 r^amp + "
+        "0.1 r^energy; [C] keeps the penalty inside the task reward with a smaller coefficient instead); 1 = unchanged",
+    )
+
+
+class PHCParams(BaseModel):
+    """Parameters of the PHC / PHC+ imitator ([P] paper value, [C] official code value)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    # ------------------------------------------------------------------------- observation
+    obs: Literal["rot", "keypoint"] = Field(
+        "rot",
+        description="imitation goal: 'rot' = rotation + keypoint goal (24 per body, [P]/[C] obs_v 6) or "
+        "'keypoint' = keypoints only (9 per body, [P] keypoint model, [C] obs_v 7)",
+    )
+    sixd: Literal["zhou", "tan_norm"] = Field(
+        "zhou",
+        description="6-D rotation features: 'zhou' = first two matrix columns ([P], Zhou et al.) or "
+        "'tan_norm' = rotated x and z axes ([C])",
+    )
+    # ------------------------------------------------------------------------------ reward
+    reward_form: Literal["paper", "code"] = Field(
+        "paper",
+        description="imitation reward errors: 'paper' = norms exp(-k ||x^ - x||) (mean over bodies of the "
+        "per-body norm / rotation angle) or 'code' = mean squared components exp(-k mean (x^ - x)^2)",
+    )
+    reward_weights: tuple[float, float, float, float] = Field(
+        DEFAULT_WEIGHTS, description="(w_pos, w_rot, w_vel, w_ang_vel); [C] and PULSE Table 4: 0.5, 0.3, 0.1, 0.1 (not in the PHC paper)"
+    )
+    reward_scales: tuple[float, float, float, float] = Field(
+        DEFAULT_SCALES, description="(k_pos, k_rot, k_vel, k_ang_vel) in exp(-k e); [P]/[C]: 100, 10, 0.1, 0.1"
+    )
+    energy_form: Literal["paper", "code"] = Field(
+        "code",
+        description="energy penalty: 'paper' = -c sum (tau q-dot)^2 as printed, or 'code' = -c sum |tau q-dot| (power, as in "
+        "Fu et al. whom the paper cites), zero for the first 3 steps of an episode. Default 'code': the printed square "
+        "gives about -10^3 per step on amp right after RSI (measured), drowning the imitation reward (<= 1)",
+    )
+    energy_coef: float = Field(
+        0.0005, ge=0.0, description="energy coefficient c; [P]/[C] primitives 0.0005 ([C] composer/get-up 0.00005); 0 disables"
+    )
+    # ------------------------------------------------------------------------- termination
+    termination: Literal["paper", "code"] = Field(
+        "paper",
+        description="early termination: 'paper' = mean distance of the checked bodies > threshold (RET, 0.5 m) or "
+        "'code' = any checked body > threshold (0.25 m) after the first step",
+    )
+    termination_threshold: float | None = Field(None, gt=0.0, description="m; None: 0.5 for 'paper', 0.25 for 'code'")
+    termination_grace: int | None = Field(
+        None, ge=0, description="steps after a reset that are never checked; None: 0 for 'paper', 1 for 'code' ([C] progress_buf > 1)"
+    )
+    termination_exclude: list[str] | None = Field(
+        None, description="bodies not checked (RET: ankles and toes); None: the skeleton's feet (smpl: ankles + toes; amp: feet)"
+    )
+    fall_check: bool = Field(
+        False, description="also terminate when a non-foot body touches the ground (not PHC imitation; ASE/AMP style)"
+    )
+    fall_height: float | None = Field(None, gt=0.0, description="with fall_check: only count contacts of bodies below this height, m (ASE: 0.15)")
+    # ------------------------------------------------------------------------------ action
+    action: Literal["absolute", "residual"] = Field(
+        "absolute",
+        description="'absolute' = PD target offset + scale * a ([P]/[C]: PHC removed residual actions) or "
+        "'residual' = next reference pose + a (UHC-style; cheaper early learning on CPU, measured here)",
+    )
+    action_clip: float | None = Field(
+        None, gt=0.0, description="clamp actions to [-clip, clip] (the env's Box bounds); None: unbounded (the committed residual recipe: 3)"
+    )
+    action_scale_overrides: dict[str, float] = Field(
+        default_factory=lambda: {"*Knee_y": 5.0},
+        description="absolute mode: DoF-name glob -> action scale, rad ([C] 'stronger knee': knee y = 5)",
+    )
+    # ---------------------------------------------------------------------------- episodes
+    episode_steps: int = Field(300, ge=1, description="time limit in control steps ([C] 300 = 10 s at 30 Hz); truncation, bootstrapped")
+    start_sampling: StartSamplingParams = Field(
+        default_factory=StartSamplingParams,
+        description="where in a clip episodes start: 'uniform' (DeepMimic / PHC RSI) or 'adaptive' (failure-driven time bins, "
+        "BeyondMimic; mocap.start_sampling)",
+    )
+    control_grid: bool = Field(
+        True,
+        description="episode start times on the control-rate grid (t0 = j dt, j uniform over the clip's grid times) and the "
+        "reference read from a table precomputed at those times (MotionLibrary.use_control_grid; the speed path). False: "
+        "continuous start times, the reference interpolated and run through forward kinematics every step (DeepMimic's "
+        "and PHC's continuous phase; identical frames at grid times)",
+    )
+    fail_states: FailStateParams | None = Field(
+        None,
+        description="fallen and far episode starts with a grace window (PHC+ fail-state recovery, mocap_phc.recovery); None: RSI only",
+    )
+    reference_noise: NoiseLevel | None = Field(
+        None,
+        description="train on references with synthetic estimator noise (mocap.noisy: joint and root jitter, dropped frames): "
+        "the policy observes the noisy reference and its residual actions are relative to it, while the reward, termination "
+        "and the hard-negative evaluation use the clean clip ([I], not in PHC, which trains on clean AMASS; for avatars driven "
+        "by video pose estimators, what `mocap eval-noisy` measures). None: clean references",
+    )
+    reference_noise_every: int = Field(1, ge=1, description="PPO iterations between fresh draws of the reference noise")
+    recovery_goal: RecoveryGoalParams | None = Field(
+        None,
+        description="fail-state recovery goal (PHC Eq. 3, mocap_phc.recovery): farther than close_distance from the reference root, "
+        "the goal keeps only the root (a point goal); None: always the full imitation goal (PHC primitives)",
+    )
+    # ----------------------------------------------------------------------- hard negatives
+    hard_negative: bool = Field(
+        True, description="PHC+ soft hard-negative mining: clip sampling weights follow per-clip failure counts ([C] auto_pmcp_soft)"
+    )
+    hard_negative_floor: float = Field(
+        0.2, ge=0.0, le=1.0, description="share of sampling mass kept on the base weights so that no clip goes to 0 (PHC+: 0)"
+    )
+    hard_negative_decay: float = Field(1.0, gt=0.0, le=1.0, description="failure counts are multiplied by this before each update (PHC: 1)")
+    update_every: int = Field(256, ge=1, description="finished training episodes between weight updates from their failure rates")
+    eval_every: int = Field(
+        100, ge=0, description="trainer iterations between evaluate_clips runs (every clip from frame 0, deterministic); 0 disables"
+    )
+    eval_num_envs: int = Field(64, ge=1, description="clips evaluated in parallel by evaluate_clips")
+    eval_threshold: float = Field(0.5, gt=0.0, description="evaluate_clips failure: mean body error above this, m ([P]/[C] evaluation 0.5)")
+
+    # -------------------------------------------------------------------- AMP (PHC+ style reward)
+    amp: bool = Field(
+        False,
+        description="add the AMP discriminator reward r = w_task r_task + w_amp r_amp ([P] PHC Eq. 1 / PULSE Eq. 5); "
+        "off until PHC+ training is run (mocap_phc.amp)",
+    )
+    amp_loss: Literal["lsgan", "bce"] = Field(
+        "lsgan",
+        description="discriminator objective: 'lsgan' = AMP paper least squares, GP w/2 with w = 10, reward max(0, 1 - (D-1)^2/4) "
+        "([P] 'same as AMP') or 'bce' = BCE on logits, GP 5, logit reg 0.01, weight decay 1e-4, coef 5, reward "
+        "-2 log(max(1 - sigmoid(D), 1e-4)) ([C])",
+    )
+    amp_history: int = Field(10, ge=1, description="AMP observation frames per discriminator input ([P]/[C] 10)")
+    amp_hidden: list[int] = Field(default_factory=lambda: [1024, 512], description="discriminator ReLU MLP widths ([C] [1024, 512])")
+    amp_joints: Literal["rot6d", "dof"] = Field(
+        "rot6d", description="AMP joint features: local rotations as tan-norm 6-D ([C]) or hinge angles (compact for hinge skeletons)"
+    )
+    amp_key_bodies: list[str] | None = Field(
+        None, description="bodies whose root-relative positions enter the AMP observation; None: the skeleton's end effectors ([C] ankles + wrists)"
+    )
+    amp_exclude: list[str] = Field(
+        default_factory=list,
+        description="bodies whose joint rotations and DoF velocities are left out of the AMP observation; [] keeps every "
+        "joint. [C] build_amp_observations_smpl drops the hands and toes: [L_Hand, R_Hand, L_Toe, R_Toe] with "
+        "amp_key_bodies [R_Ankle, L_Ankle, R_Wrist, L_Wrist] gives its 196 features per frame on smpl ([P] does not say)",
+    )
+    amp_lr: float = Field(
+        2e-5, gt=0.0, description="discriminator Adam learning rate ([C] it shares the policy optimizer, PHC+ lr 2e-5; small CPU runs want ~1e-4)"
+    )
+    amp_batch: int = Field(512, ge=2, description="demo and policy windows per discriminator step ([C] amp_batch_size 512)")
+    amp_updates_per_iteration: int = Field(
+        5, ge=0, description="discriminator steps per PPO iteration ([C]: one per PPO minibatch step; [I] 5)"
+    )
+    amp_grad_penalty: float | None = Field(None, ge=0.0, description="None: 10 for lsgan (applied as w/2) and 5 for bce")
+    amp_reward_scale: float | None = Field(None, gt=0.0, description="None: 1 for lsgan, 2 for bce ([C] disc_reward_scale)")
+    task_reward_weight: float = Field(0.5, ge=0.0, description="w_task ([P]/[C] 0.5)")
+    amp_reward_weight: float = Field(0.5, ge=0.0, description="w_amp ([P]/[C] 0.5)")
+    amp_energy_mix: Literal["paper", "code"] = Field(
+        "paper",
+        description="where the energy penalty goes when amp is on: 'paper' = r = w_task r^g + w_amp r^amp + r^energy (Eq. 1) or "
+        "'code' = w_task (r^g + r^energy) + w_amp r^amp (the code adds it to the task reward)",
+    )
+    amp_replay_size: int = Field(200_000, ge=1, description="policy-sample replay buffer ([C] 200,000)")
+    amp_replay_keep_prob: float = Field(0.01, gt=0.0, le=1.0, description="keep probability once the replay buffer has filled ([C] 0.01)")
+    amp_demo_buffer_size: int = Field(200_000, ge=1, description="demo-window ring buffer, refilled with amp_batch fresh windows per step ([C] 200,000)")
+
+    def observation(self) -> PHCObservation:
+        from mocap_phc.env import PHCObservation
+
+        return PHCObservation(self.obs, self.sixd, self.recovery_goal)
+
+    def action_map(self, skeleton: Skeleton) -> ActionMap:
+        from mocap_phc.env import ActionMap
+
+        return ActionMap.for_skeleton(skeleton, self.action, self.action_clip, self.action_scale_overrides)
+
+
+__all__ = ["PHCParams", "RecoveryGoalParams"]
