@@ -158,7 +158,7 @@ def check_task(task: Task, skeleton: Skeleton, num_envs: int = 4, steps: int = 3
         done = task.terminated(state)
         _shape(done, (N,), f"Task.terminated (step {k})")
         _require(done.dtype == torch.bool, f"Task.terminated: expected bool, got {done.dtype}")
-    task.reset(torch.arange(0, N, 2), state.index(torch.arange(0, N, 2)))
+    task.reset(torch.arange(0, N, 2), state)  # the framework passes the full (N-row) state after a subset reset
     metrics = task.metrics()
     _require(isinstance(metrics, dict) and all(isinstance(k, str) and isinstance(v, (int, float)) for k, v in metrics.items()),
              "Task.metrics must return {name: float}")  # fmt: skip

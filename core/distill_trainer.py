@@ -331,11 +331,13 @@ class DistillTrainer(Trainer):
                 s_out = student.student_action(observations_to(obs, device), sample=False)
             except (ValueError, RuntimeError) as exc:
                 goal = None if obs.goal is None else obs.goal.shape[-1]
-                raise ValueError(
-                    f"the latent space cannot read the teacher's observation (proprio {obs.proprio.shape[-1]}, goal {goal} dims): {exc}"
-                ) from exc
+                raise StageFailed(
+                    f"distill: the latent space cannot read the teacher's observation (proprio {obs.proprio.shape[-1]}, goal {goal} "
+                    f"dims): {exc}; the teacher must be an imitator with the observation the latent's sizes were built for "
+                    "(e.g. phc, whose proprioception and goal sizes follow the humanoid)"
+                ) from None
         if tuple(s_out.shape) != tuple(t_out.shape):
-            raise ValueError(
+            raise StageFailed(
                 f"the latent space outputs {tuple(s_out.shape)}, the teacher's policy output is {tuple(t_out.shape)}: "
                 "set the latent's action size to the teacher's"
             )

@@ -292,7 +292,9 @@ class Task(ABC):
 
     @abstractmethod
     def reset(self, env_ids: Tensor, state: SimState) -> None:
-        """Sample new goals for envs ``env_ids`` after they were reset to ``state``."""
+        """Sample new goals for envs ``env_ids`` (K,) after they were reset. ``state`` is the whole
+        batch after the reset (N rows, the task env passes the simulator's state): read rows
+        ``state.index(env_ids)``."""
 
     @abstractmethod
     def observe(self, state: SimState) -> Tensor:

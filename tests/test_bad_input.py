@@ -362,3 +362,19 @@ def test_broken_plugin_is_one_warning_and_cli_still_works(monkeypatch):
     warnings = [line for line in result.stderr.splitlines() if "half_installed" in line]
     assert len(warnings) == 1 and warnings[0].startswith("warning:") and "mocap_half_installed_xyz" in warnings[0]
     assert '"sim_mujoco"' in result.stdout
+
+
+def test_a_teacher_whose_observation_the_latent_cannot_read_is_one_error_line(tmp_path, capsys):
+    """Distilling from an imitator with another observation (pd_replay's raw state, 28 dims) was a
+    traceback; it is one line naming both sizes and what a teacher must be."""
+    from mocap.cli import main
+
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(
+        "spec_version: 1\nname: pdrep-distill\nmotions: {name: deepmimic, params: {clips: [walk]}}\nimitator: {name: pd_replay}\n"
+        "latent:\n  name: pulse\n  params: {latent_dim: 4, encoder_hidden: [8], prior_hidden: [8], decoder_hidden: [8]}\n"
+        "  trainer: {name: distill, params: {num_envs: 2, horizon: 4, total_env_steps: 16, minibatch_envs: 2, eval_every: 0}}\n"
+    )
+    assert main(["run", str(spec), "--out", str(tmp_path / "runs" / "x")]) == 2
+    err = capsys.readouterr().err
+    assert "cannot read the teacher's observation" in err and "Traceback" not in err

@@ -196,6 +196,9 @@ def test_task_stage_trains_with_ppo_through_any_latent(latent, teacher_file, tmp
     rows = [json.loads(line) for line in (tmp_path / "runs" / "t" / "metrics.jsonl").read_text().splitlines()]
     task_rows = [r for r in rows if r.get("stage") == "task" or "eval/root_height" in r]
     assert any("eval/root_height" in r for r in task_rows), rows[-1]
+    # the task's own metrics reach the stage summary and report.md, not only metrics.jsonl
+    assert "eval/root_height" in stages["task"]["metrics"]
+    assert "root_height" in (tmp_path / "runs" / "t" / "report.md").read_text()
 
 
 def test_task_without_latent_is_a_clear_error(tmp_path):

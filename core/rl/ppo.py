@@ -229,6 +229,7 @@ class PPOTrainer(Trainer):
         act_dtype = torch.long if isinstance(space, MultiDiscrete) else torch.float32
         T, N = p.horizon, p.num_envs
         last_stats: dict[str, float] = {}
+        last_eval: dict[str, float] = {}  # the latest value of each eval/ metric (the env's periodic or per-iteration evaluation)
         t_start = time.perf_counter()
         steps_at_start = env_steps
 
@@ -370,6 +371,7 @@ class PPOTrainer(Trainer):
 
                     for key, val in (env.after_iteration(iteration, policy_fn) or {}).items():
                         log[f"eval/{key}"] = float(val)
+                        last_eval[f"eval/{key}"] = float(val)
                 if parallel:  # one line for all ranks: sums, slowest times, means, pooled episode windows
                     log = dist.reduce_metrics(
                         log, sums=("episodes_finished",), maxima=("time/rollout_s", "time/update_s"), windows=window
@@ -385,14 +387,14 @@ class PPOTrainer(Trainer):
                     save(final=iteration >= iterations)
                 if stop:
                     ctx.console.print(f"ppo: stopped at iteration {iteration}; checkpoint {ckpt_path}")
-                    return StageResult(checkpoint=ckpt_path, metrics=_summary(last_stats, iteration, env_steps))
+                    return StageResult(checkpoint=ckpt_path, metrics=_summary({**last_eval, **last_stats}, iteration, env_steps))
         finally:
             progress.close()
             env.close()
 
         if not last_stats:  # the checkpoint was already at the end (e.g. a crash before policy.pt)
             last_stats = {f"episode/{k}": float(np.mean(v)) for k, v in window.items() if v}
-        metrics = _summary(last_stats, iteration, env_steps)
+        metrics = _summary({**last_eval, **last_stats}, iteration, env_steps)
         policy_path = workdir / POLICY_NAME
         if parallel:
             dist.assert_in_sync(model, "ppo")
@@ -501,9 +503,12 @@ def _own_state(ck: dict[str, Any], rank: int) -> dict[str, Any] | None:
 
 
 def _summary(stats: dict[str, float], iteration: int, env_steps: int) -> dict[str, float]:
+    """The stage's summary metrics (``stages.json``, ``report.md``, comparisons): episode statistics,
+    the env's ``eval/`` metrics (a task's ``metrics()``, periodic imitation evaluations) and a few
+    learning diagnostics."""
     out = {"iterations": float(iteration), "env_steps": float(env_steps)}
     for key, value in stats.items():
-        if key.startswith("episode/") or key in ("explained_variance", "steps_per_s_run", "approx_kl"):
+        if key.startswith(("episode/", "eval/")) or key in ("explained_variance", "steps_per_s_run", "approx_kl"):
             out[key] = float(value)
     return out
 
