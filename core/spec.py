@@ -530,6 +530,18 @@ def json_schema(plugins: PluginSet) -> dict[str, Any]:
             )
         return {"oneOf": variants} if variants else {}
 
+    trainers = one_of("trainer")
+    if trainers:  # a stage's (and eval's) trainer params are typed by the registered trainers too
+        for model in defs.values():
+            field = model.get("properties", {}).get("trainer")
+            if field is None:
+                continue
+            typed = {"allOf": [{"$ref": "#/$defs/ComponentRef"}, trainers]}
+            nullable = "anyOf" in field
+            model["properties"]["trainer"] = {
+                **{k: v for k, v in field.items() if k not in ("anyOf", "$ref")},
+                **({"anyOf": [typed, {"type": "null"}]} if nullable else typed),
+            }
     props = schema["properties"]
     for role, kind in ROLE_KINDS.items():
         variants = one_of(kind)

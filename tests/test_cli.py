@@ -72,6 +72,9 @@ def test_schema_types_component_params(toy_plugins):
     schema = json.loads(result.stdout)
     text = json.dumps(schema["properties"]["latent"])
     assert "\"const\": \"toy_latent\"" in text and "ToyModelParams" in text and "Optim" in schema["$defs"]
+    # a stage's trainer params are typed by the registered trainers (they were a free-form mapping)
+    trainer = json.dumps(schema["$defs"]["StageSpec"]["properties"]["trainer"])
+    assert "\"const\": \"count\"" in trainer and "CountParams" in json.dumps(schema) and "\"null\"" in trainer
 
 
 def test_run_and_rerun_reuses(toy_plugins, spec_file, tmp_path):
