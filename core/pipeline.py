@@ -27,7 +27,7 @@ import json
 import shutil
 import signal
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
 from typing import Any, Callable, Iterator
@@ -95,6 +95,10 @@ class StageContext:
     device: torch.device
     console: Console
     _stop: Callable[[], bool] = field(default=lambda: False, repr=False)
+    #: the RL env factory of a sub-phase (:meth:`phase`); None: :meth:`make_rl_env` builds the stage's
+    env_factory: Callable[[int], Any] | None = field(default=None, repr=False)
+    #: in a :meth:`phase`: the stage's own artifact directory (where :meth:`publish` writes); None: ``workdir``
+    stage_dir: Path | None = field(default=None, repr=False)
 
     @property
     def spec(self) -> Spec:
@@ -135,9 +139,40 @@ class StageContext:
             check_latent_loaded(component, Path(checkpoint), self.spec.latent.name)
         return component
 
+    def phase(
+        self,
+        name: str,
+        *,
+        workdir: Path,
+        seed: int | None = None,
+        env_factory: Callable[[int], Any] | None = None,
+        stop: Callable[[], bool] | None = None,
+    ) -> "StageContext":
+        """A child context for a sub-phase that another trainer runs inside this stage (PMCP's
+        primitives, VMP's VAE and tracker under PPO or the supervised trainer): its own ``workdir``
+        (its checkpoints and resume), its own rows in ``metrics.jsonl`` (``log`` labelled
+        ``<stage>/<name>``: close it when the phase ends), optionally its own ``seed``, RL env
+        (``env_factory(num_envs)``, used by :meth:`make_rl_env`) and an extra ``stop`` condition
+        (the parent's Ctrl-C still stops it). Published files (:meth:`publish`) reach the run
+        directory as the parent's do. Everything else is the parent's."""
+        parent_stop = self._stop
+        halt = parent_stop if stop is None else (lambda: bool(stop()) or bool(parent_stop()))
+        return replace(
+            self,
+            workdir=Path(workdir),
+            log=self.log.child(name),
+            seed=self.seed if seed is None else int(seed),
+            env_factory=env_factory if env_factory is not None else self.env_factory,
+            stage_dir=self.stage_dir if self.stage_dir is not None else self.workdir,
+            _stop=halt,
+        )
+
     def make_rl_env(self, num_envs: int) -> Any:
         """The RL problem of this stage: ``stage_component().make_env(self, num_envs)`` (a VecEnv);
-        for the ``task`` stage, :func:`mocap.task_env.make_task_env` (the task through the latent space)."""
+        for the ``task`` stage, :func:`mocap.task_env.make_task_env` (the task through the latent space);
+        in a :meth:`phase` with an ``env_factory``, that factory's env."""
+        if self.env_factory is not None:
+            return self.env_factory(num_envs)
         if self.stage == "task" and self.spec.latent is not None:
             from mocap.task_env import make_task_env
 
@@ -160,7 +195,8 @@ class StageContext:
         video). The pipeline copies it there; a later run that reuses this stage gets it too."""
         from mocap.paths import confined
 
-        path = confined(self.workdir / PUBLISHED_DIR, name)  # a name built from data never leaves the folder
+        root = self.stage_dir if self.stage_dir is not None else self.workdir  # a phase publishes for its stage
+        path = confined(root / PUBLISHED_DIR, name)  # a name built from data never leaves the folder
         path.parent.mkdir(parents=True, exist_ok=True)
         return path
 

@@ -30,6 +30,12 @@ class MetricsLogger:
         self._tb_dir = tensorboard_dir
         self._tb: Any = None
 
+    def child(self, name: str) -> "MetricsLogger":
+        """A logger for a sub-phase of this stage: the same ``metrics.jsonl`` and TensorBoard folder,
+        stage label ``<stage>/<name>`` (so a resumed phase truncates only its own rows). Close it
+        when the phase ends."""
+        return MetricsLogger(self.path, f"{self.stage}/{name}", self._tb_dir, enabled=self.enabled)
+
     def log(self, step: int, **metrics: float) -> None:
         if not self.enabled:
             return

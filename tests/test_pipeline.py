@@ -199,3 +199,35 @@ def test_a_misspelled_video_clip_fails_before_any_stage_trains(tmp_path: Path):
     with pytest.raises(UserError, match=r"video_clip: no clip 'wlak' in the motion set \(clips: walk, run\)"):
         run_pipeline(resolved, plugins, tmp_path / "runs" / "x", console=quiet())
     assert not (tmp_path / "runs" / "artifacts").exists() or not any((tmp_path / "runs" / "artifacts").iterdir())
+
+
+def test_a_phase_is_a_child_context_of_its_stage(tmp_path: Path):
+    """``StageContext.phase``: what PMCP and VMP run PPO / the supervised trainer in (it replaced two
+    hand-made shims): own workdir, rows labelled ``<stage>/<phase>``, own env and stop condition, the
+    parent's Ctrl-C, and published files still reach the stage's run directory."""
+    import torch
+    from rich.console import Console
+
+    from mocap.pipeline import StageContext
+    from mocap.runlog import MetricsLogger
+
+    stopped = {"parent": False, "phase": False}
+    ctx = StageContext(
+        stage="latent", resolved=None, plugins=None, workdir=tmp_path / "stage", run_dir=tmp_path, upstream={},  # type: ignore[arg-type]
+        log=MetricsLogger(tmp_path / "metrics.jsonl", "latent"), seed=3, device=torch.device("cpu"), console=Console(),
+        _stop=lambda: stopped["parent"],
+    )  # fmt: skip
+    sub = ctx.phase("tracker", workdir=tmp_path / "stage" / "tracker", seed=9, env_factory=lambda n: ("env", n), stop=lambda: stopped["phase"])
+    assert sub.workdir == tmp_path / "stage" / "tracker" and sub.seed == 9 and ctx.seed == 3
+    assert sub.make_rl_env(4) == ("env", 4)
+    sub.log.log(1, x=1.0)
+    ctx.log.log(1, y=2.0)
+    rows = [json.loads(line) for line in (tmp_path / "metrics.jsonl").read_text().splitlines()]
+    assert [r["stage"] for r in rows] == ["latent/tracker", "latent"]
+    assert not sub.should_stop()
+    stopped["phase"] = True
+    assert sub.should_stop() and not ctx.should_stop()
+    stopped["phase"], stopped["parent"] = False, True
+    assert sub.should_stop()
+    assert sub.publish("t.md").parent == ctx.publish("t.md").parent
+    assert sub.phase("vae", workdir=tmp_path / "v").publish("a.md").parent == ctx.publish("a.md").parent

@@ -95,7 +95,7 @@ from mocap_phc.pmcp_composite import (
     make_composite_imitator,
 )
 from mocap_phc.pmcp_params import GetupPhaseParams, PMCPParams, RecoveryPhaseParams
-from mocap_phc.pmcp_phases import ComposerEnv, PrimitiveEnv, _PhaseContext, _PhaseLog, _SeededPPO
+from mocap_phc.pmcp_phases import ComposerEnv, PrimitiveEnv, _SeededPPO
 from mocap_phc.pmcp_rules import PlateauTracker, next_hard_set, pmcp_report, unique_clip_names
 from mocap_phc.recovery import FailStateParams
 
@@ -370,15 +370,14 @@ class PMCPTrainer(Trainer):
                 model.load_state_dict(source.state_dict())
 
         ppo_params = p.ppo.model_copy(update={"total_env_steps": max(1, int(record["budget_env_steps"]))})
-        log = _PhaseLog(ctx.log, phase)
-        sub = _PhaseContext(ctx, phase_dir, seed, make_env, log, lambda: "env" in holder and holder["env"].done)
+        sub = ctx.phase(phase, workdir=phase_dir, seed=seed, env_factory=make_env, stop=lambda: "env" in holder and holder["env"].done)
         names = [self.clip_names[i] for i in ids]
         what = "get-up phase of P(F)" if getup else ("recovery primitive P(F)" if recovery else "primitive")
         ctx.console.print(f"pmcp: {what} {k} on {len(ids)} clip(s): {', '.join(names[:8])}{' ...' if len(names) > 8 else ''}")
         try:
             result = _SeededPPO(ppo_params, init).run(sub)
         finally:
-            log.close()
+            sub.log.close()
         env = holder.get("env")
         ck = load_checkpoint(phase_dir / "ppo.pt")
         finished = bool(ck.get("finished")) or int(ck["iteration"]) >= ppo_params.iterations
@@ -470,13 +469,12 @@ class PMCPTrainer(Trainer):
             self._carry_discriminator(inner, last, phase_dir)
             return ComposerEnv(inner, prims, p.composer_form, p.composer_eps)
 
-        log = _PhaseLog(ctx.log, "composer")
-        sub = _PhaseContext(ctx, phase_dir, seed, make_env, log, lambda: False)
+        sub = ctx.phase("composer", workdir=phase_dir, seed=seed, env_factory=make_env)
         ctx.console.print(f"pmcp: composer ({p.composer_form}) over {K} primitive(s) on all {len(ids)} clips")
         try:
             result = _SeededPPO(p.composer_ppo, init).run(sub)
         finally:
-            log.close()
+            sub.log.close()
         ck = load_checkpoint(phase_dir / "ppo.pt")
         if not (bool(ck.get("finished")) or int(ck["iteration"]) >= p.composer_ppo.iterations):
             return False

@@ -4,8 +4,6 @@ plumbing that runs :class:`~mocap.rl.ppo.PPOTrainer` in a phase's own directory 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import torch
@@ -142,60 +140,3 @@ class _SeededPPO(PPOTrainer):
         if self.init_model is not None:
             self.init_model(model)
         return model
-
-
-class _PhaseLog:
-    """A metrics logger for one phase: its own stage label (``imitator/prim0``) in the same
-    ``metrics.jsonl``, so that PPO's resume truncation touches only this phase's lines."""
-
-    def __new__(cls, parent: Any, phase: str) -> Any:
-        from mocap.runlog import MetricsLogger
-
-        path = getattr(parent, "path", None)
-        stage = getattr(parent, "stage", "stage")
-        if path is None:
-            return _PassLog(parent)
-        return MetricsLogger(Path(path), f"{stage}/{phase}", tensorboard_dir=getattr(parent, "_tb_dir", None))
-
-
-class _PassLog:
-    def __init__(self, parent: Any):
-        self.parent = parent
-
-    def log(self, step: int, **metrics: float) -> None:
-        self.parent.log(step, **metrics)
-
-    def truncate_after(self, step: int) -> None:
-        pass
-
-    def close(self) -> None:
-        pass
-
-
-@dataclass
-class _PhaseContext:
-    """What :class:`PPOTrainer` uses of a stage context, for one PMCP phase."""
-
-    parent: Any
-    workdir: Path
-    seed: int
-    env_factory: Callable[[int], Any]
-    log: Any
-    halt: Callable[[], bool]
-
-    @property
-    def device(self) -> Any:
-        return getattr(self.parent, "device", "cpu")
-
-    @property
-    def console(self) -> Any:
-        return self.parent.console
-
-    def make_rl_env(self, num_envs: int) -> Any:
-        return self.env_factory(num_envs)
-
-    def should_stop(self) -> bool:
-        return bool(self.halt()) or bool(self.parent.should_stop())
-
-    def spec_yaml(self) -> str:
-        return self.parent.spec_yaml()

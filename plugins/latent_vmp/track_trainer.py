@@ -22,7 +22,7 @@ continues where it stopped.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 
 from mocap.checkpoint import load_checkpoint, save_checkpoint
@@ -36,38 +36,6 @@ FORMAT = "mocap_vmp.vmp/1"
 COMBINED_NAME = "vmp.pt"
 VAE_DIR = "vae"
 TRACKER_DIR = "tracker"
-
-
-class SubContext:
-    """A view of a :class:`~mocap.pipeline.StageContext` with its own ``workdir`` and ``log`` (and,
-    for PPO, ``make_rl_env``); everything else is the parent's."""
-
-    #: set on the instance for PPO (declared for the type checker; unset, the parent's is used)
-    make_rl_env: Callable[[int], Any]
-
-    def __init__(self, parent: Any, workdir: Path, log: Any, **extra: Any):
-        self._parent = parent
-        self.workdir = Path(workdir)
-        self.log = log
-        for k, v in extra.items():
-            setattr(self, k, v)
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._parent, name)
-
-
-def _sub_logger(log: Any, suffix: str) -> Any:
-    """A metrics logger writing to the same ``metrics.jsonl`` under the stage name ``<stage>/<suffix>``."""
-    from mocap.runlog import MetricsLogger
-
-    path = getattr(log, "path", None)
-    if path is None:
-        return log
-    return MetricsLogger(
-        path,
-        f"{getattr(log, 'stage', 'latent')}/{suffix}",
-        tensorboard_dir=getattr(log, "_tb_dir", None),
-    )
 
 
 class VmpTrackTrainer(Trainer):
@@ -92,12 +60,11 @@ class VmpTrackTrainer(Trainer):
         vae_dir = workdir / VAE_DIR
         vae_file = vae_dir / FINAL_NAME
         if not vae_file.is_file():
-            log = _sub_logger(ctx.log, "vae")
+            vae_ctx = ctx.phase("vae", workdir=vae_dir)
             try:
-                res = SupervisedTrainer(p.vae).run(SubContext(ctx, vae_dir, log))
+                res = SupervisedTrainer(p.vae).run(vae_ctx)
             finally:
-                if log is not ctx.log:
-                    log.close()
+                vae_ctx.log.close()
             if not vae_file.is_file():  # stopped (Ctrl-C): vae/vmp.pt resumes it
                 return StageResult(
                     checkpoint=res.checkpoint,
@@ -110,14 +77,11 @@ class VmpTrackTrainer(Trainer):
 
         # --------------------------------------------------------- stage II: the tracking policy
         tracker = VmpTracker(p.tracker, ctx.skeleton, latent=latent)
-        log = _sub_logger(ctx.log, "tracker")
-        sub = SubContext(ctx, workdir / TRACKER_DIR, log, vmp_latent=latent)
-        sub.make_rl_env = lambda n: tracker.make_env(sub, n)
+        sub = ctx.phase("tracker", workdir=workdir / TRACKER_DIR, env_factory=lambda n: tracker.make_env(ctx, n))
         try:
             res = PPOTrainer(p.ppo).run(sub)
         finally:
-            if log is not ctx.log:
-                log.close()
+            sub.log.close()
         if ctx.should_stop() or res.checkpoint is None or Path(res.checkpoint).name != "policy.pt":
             return StageResult(checkpoint=res.checkpoint, metrics=res.metrics)
         policy = load_checkpoint(Path(res.checkpoint))
@@ -143,4 +107,4 @@ class VmpTrackTrainer(Trainer):
         return StageResult(checkpoint=combined, metrics=metrics)
 
 
-__all__ = ["SubContext", "VmpTrackParams", "VmpTrackTrainer"]
+__all__ = ["VmpTrackParams", "VmpTrackTrainer"]

@@ -134,8 +134,8 @@ class VmpTracker:
     """The ``vmp_tracker`` imitator component: builds :class:`VmpTrackingEnv` for PPO and, when
     loaded from a ``vmp.pt``, holds the trained VAE and policy (:meth:`imitator`).
 
-    ``make_env`` needs the trained VAE: ``latent`` given here, or ``ctx.vmp_latent`` (set by the
-    ``vmp_track`` trainer), or the upstream ``latent`` stage's checkpoint."""
+    ``make_env`` needs the trained VAE: ``latent`` given here (the ``vmp_track`` trainer does), or the
+    upstream ``latent`` stage's checkpoint."""
 
     def __init__(
         self,
@@ -154,10 +154,7 @@ class VmpTracker:
     def _latent(self, ctx: Any) -> Any:
         if self.latent is not None:
             return self.latent
-        latent = getattr(ctx, "vmp_latent", None)
-        if latent is not None:
-            return latent
-        upstream = getattr(ctx, "upstream", {}) or {}
+        upstream = ctx.upstream
         if "latent" in upstream and upstream["latent"].checkpoint is not None:
             return ctx.stage_component("latent", checkpoint=upstream["latent"].checkpoint)
         raise ValueError(
