@@ -70,10 +70,8 @@ chunk helpers to :mod:`mocap.distill_chunks`.
 from __future__ import annotations
 
 import math
-import random
 import time
 from collections import deque
-from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
@@ -81,9 +79,10 @@ import torch
 from torch import Tensor
 
 from mocap import distributed as dist
-from mocap.checkpoint import load_checkpoint, save_checkpoint
+from mocap import trainer_scaffold as scaffold
+from mocap.checkpoint import save_checkpoint
 from mocap.faults import FaultGuard
-from mocap.rng import rng_state, set_rng_state
+from mocap.rng import rng_state
 from mocap.interfaces import DistillableLatent, Imitator, LatentSpace, Simulator, StageResult, Trainer
 from mocap.hard_negatives import failure_weights
 from mocap.pipeline import StageFailed
@@ -115,17 +114,9 @@ class DistillTrainer(Trainer):
 
     def run(self, ctx: Any) -> StageResult:
         p = self.params
-        if p.torch_threads is not None:
-            torch.set_num_threads(p.torch_threads)
-        device = torch.device(ctx.device)
-        workdir = Path(ctx.workdir)
-        workdir.mkdir(parents=True, exist_ok=True)
-        ckpt_path = workdir / CHECKPOINT_NAME
+        ckpt_path, device = scaffold.begin(ctx, p.torch_threads, CHECKPOINT_NAME)
+        workdir = ckpt_path.parent
         spec_yaml = ctx.spec_yaml()
-
-        torch.manual_seed(ctx.seed)
-        np.random.seed(ctx.seed % 2**32)
-        random.seed(ctx.seed)
         skeleton = ctx.skeleton
         upstream = ctx.upstream.get("imitator")
         try:
@@ -165,10 +156,8 @@ class DistillTrainer(Trainer):
         iteration, env_steps = 0, 0
         last_eval: dict[str, float] = {}
         guard = FaultGuard(p.max_consecutive_faults, "distill")
-        if ckpt_path.is_file():
-            ck = load_checkpoint(ckpt_path, map_location=device)
-            if ck.get("format") != CHECKPOINT_FORMAT:
-                raise ValueError(f"{ckpt_path}: not a distill checkpoint (format {ck.get('format')!r})")
+        ck = scaffold.resume_from(ctx, ckpt_path, CHECKPOINT_FORMAT, "distill", map_location=device)
+        if ck is not None:
             student.load_state_dict(ck["student"])
             optimizer.load_state_dict(ck["optimizer"])
             mine = _own_state(ck, dist.rank())
@@ -182,14 +171,10 @@ class DistillTrainer(Trainer):
                 window = {k: deque(v, maxlen=EPISODE_WINDOW) for k, v in mine["episode_window"].items()}
             last_eval = dict(ck.get("last_eval", {}))
             guard.load_state_dict(ck.get("faults", {}))
-            if mine is not None:
-                set_rng_state(mine["rng"])
-            ctx.log.truncate_after(iteration)
-            ctx.console.print(f"distill: resuming at iteration {iteration} ({env_steps:,} env steps)")
+            scaffold.resumed(ctx, "distill", iteration, mine["rng"] if mine is not None else None, f"iteration {iteration} ({env_steps:,} env steps)")
             if int(ck.get("world_size", 1)) != world:
                 ctx.console.print(f"distill: the checkpoint was written by {int(ck.get('world_size', 1))} process(es), resuming with {world}")
         else:
-            ctx.log.truncate_after(0)
             try:
                 student.init_from_teacher(teacher)
             except ValueError as exc:  # a student/teacher mismatch the spec has to fix

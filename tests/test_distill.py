@@ -221,7 +221,9 @@ def test_resume_is_exact(amp, walk, teacher_file, tmp_path):
 
 def test_dimension_mismatch_is_reported(amp, walk, teacher_file, tmp_path):
     ctx = FakeContext(tmp_path, amp, walk, teacher_file, student={**STUDENT, "goal_obs": "keypoint"})
-    with pytest.raises(ValueError, match="goal"):
+    from mocap.errors import StageFailed
+
+    with pytest.raises(StageFailed, match="goal"):  # a stage error: one line from the CLI, not a traceback
         run(ctx, DistillParams(num_envs=2, horizon=2, total_env_steps=4, minibatch_envs=2, eval_every=0))
 
 

@@ -25,10 +25,8 @@ own stream; ranks the checkpoint lacks (more processes than before) start from f
 from __future__ import annotations
 
 import math
-import random
 import time
 from collections import deque
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -36,13 +34,14 @@ import torch
 from torch import Tensor
 
 from mocap import distributed as dist
-from mocap.checkpoint import load_checkpoint, save_checkpoint
+from mocap.checkpoint import save_checkpoint
 from mocap.faults import FaultGuard
 from mocap.interfaces import Box, MultiDiscrete, StageResult, Trainer
 from mocap.progress import IterationProgress
 from mocap.rl.env import AfterIteration, OnDevice
 from mocap.rl.networks import ActorCritic, init_from_policy, save_policy
-from mocap.rng import rng_state, set_rng_state
+from mocap.rng import rng_state
+from mocap import trainer_scaffold as scaffold
 from mocap.rl.ppo_params import DEFAULT_LOG_STD, PPOParams, adapt_lr, initial_log_std
 
 CHECKPOINT_FORMAT = "mocap.rl.ppo/1"
@@ -162,16 +161,8 @@ class PPOTrainer(Trainer):
     # -------------------------------------------------------------------------------- run
     def run(self, ctx: Any) -> StageResult:
         p = self.params
-        if p.torch_threads is not None:
-            torch.set_num_threads(p.torch_threads)
-        device = torch.device(ctx.device)
-        workdir = Path(ctx.workdir)
-        workdir.mkdir(parents=True, exist_ok=True)
-        ckpt_path = workdir / CHECKPOINT_NAME
-
-        torch.manual_seed(ctx.seed)
-        np.random.seed(ctx.seed % 2**32)
-        random.seed(ctx.seed)
+        ckpt_path, device = scaffold.begin(ctx, p.torch_threads, CHECKPOINT_NAME)
+        workdir = ckpt_path.parent
         env = ctx.make_rl_env(p.num_envs)
         if env.num_envs != p.num_envs:
             raise ValueError(f"the env has {env.num_envs} envs, PPO asked for {p.num_envs}")
@@ -188,10 +179,8 @@ class PPOTrainer(Trainer):
 
         iteration, env_steps = 0, 0
         guard = FaultGuard(p.max_consecutive_faults, "ppo")
-        if ckpt_path.is_file():
-            ck = load_checkpoint(ckpt_path, map_location=device)
-            if ck.get("format") != CHECKPOINT_FORMAT:
-                raise ValueError(f"{ckpt_path}: not a PPO checkpoint (format {ck.get('format')!r})")
+        ck = scaffold.resume_from(ctx, ckpt_path, CHECKPOINT_FORMAT, "PPO", map_location=device)
+        if ck is not None:
             model.load_state_dict(ck["model"])
             optimizer.load_state_dict(ck["optimizer"])
             if p.lr_schedule == "constant":  # the spec's rate, not the one saved by a run with another schedule
@@ -207,14 +196,10 @@ class PPOTrainer(Trainer):
             if mine is not None:
                 window = {k: deque(v, maxlen=EPISODE_WINDOW) for k, v in mine["episode_window"].items()}
             guard.load_state_dict(ck.get("faults", {}))
-            if mine is not None:
-                set_rng_state(mine["rng"])
-            ctx.log.truncate_after(iteration)
-            ctx.console.print(f"ppo: resuming at iteration {iteration} ({env_steps:,} env steps)")
+            scaffold.resumed(ctx, "ppo", iteration, mine["rng"] if mine is not None else None, f"iteration {iteration} ({env_steps:,} env steps)")
             if int(ck.get("world_size", 1)) != world:
                 ctx.console.print(f"ppo: the checkpoint was written by {int(ck.get('world_size', 1))} process(es), resuming with {world}")
         else:
-            ctx.log.truncate_after(0)  # lines from a run that crashed before its first checkpoint
             obs = env.reset().to(device)
             if p.normalize_obs and p.init_policy is None:  # first statistics from the initial states (of all ranks)
                 dist.sync_normalizers(model.obs_norm, lambda: model.obs_norm.update(obs))

@@ -17,21 +17,19 @@ per-clip, per-feature-group reconstruction table.
 from __future__ import annotations
 
 import math
-import random
 import time
-from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch
 
-from mocap.checkpoint import load_checkpoint, save_checkpoint
+from mocap import trainer_scaffold as scaffold
+from mocap.checkpoint import save_checkpoint
 from mocap.interfaces import StageResult, Trainer
 from mocap_vmp.features import GROUPS, clip_starts, feature_stats
 from mocap_vmp.latent import VmpLatent
 from mocap_vmp.vae import cyclical_beta, kl_divergence, per_frame_errors, reconstruction_loss
 from mocap_vmp.vmp_params import SupervisedParams
-from mocap.rng import rng_state, set_rng_state
+from mocap.rng import rng_state
 
 CHECKPOINT_FORMAT = "mocap_vmp.supervised/1"
 CHECKPOINT_NAME = "vmp.pt"
@@ -49,16 +47,8 @@ class SupervisedTrainer(Trainer):
         from mocap.motion.library import MotionLibrary
 
         p = self.params
-        if p.torch_threads is not None:
-            torch.set_num_threads(p.torch_threads)
-        device = torch.device(getattr(ctx, "device", "cpu"))
-        workdir = Path(ctx.workdir)
-        workdir.mkdir(parents=True, exist_ok=True)
-        ckpt_path = workdir / CHECKPOINT_NAME
-
-        torch.manual_seed(ctx.seed)
-        np.random.seed(ctx.seed % 2**32)
-        random.seed(ctx.seed)
+        ckpt_path, device = scaffold.begin(ctx, p.torch_threads, CHECKPOINT_NAME)
+        workdir = ckpt_path.parent
         latent = ctx.stage_component()
         if not isinstance(latent, VmpLatent):
             raise TypeError(f"the supervised trainer trains a vmp latent, got {type(latent).__name__}")
@@ -68,20 +58,15 @@ class SupervisedTrainer(Trainer):
         scheduler = torch.optim.lr_scheduler.CosineAnnealingWarmRestarts(optimizer, T_0=p.sgdr_t0, T_mult=p.sgdr_t_mult, eta_min=p.sgdr_eta_min)
         sampler = torch.Generator(device="cpu").manual_seed(ctx.seed)
         step = 0
-        if ckpt_path.is_file():
-            ck = load_checkpoint(ckpt_path, map_location=device)
-            if ck.get("format") != CHECKPOINT_FORMAT:
-                raise ValueError(f"{ckpt_path}: not a vmp checkpoint (format {ck.get('format')!r})")
+        ck = scaffold.resume_from(ctx, ckpt_path, CHECKPOINT_FORMAT, "vmp", map_location=device)
+        if ck is not None:
             latent.load_state_dict(ck["latent"])
             optimizer.load_state_dict(ck["optimizer"])
             scheduler.load_state_dict(ck["scheduler"])
             sampler.set_state(ck["sampler"])
-            set_rng_state(ck["rng"])
             step = int(ck["step"])
-            ctx.log.truncate_after(step)
-            ctx.console.print(f"vmp: resuming at step {step}")
+            scaffold.resumed(ctx, "vmp", step, ck["rng"])
         else:
-            ctx.log.truncate_after(0)
             mean, std = feature_stats(latent.library_frame_features(lib), latent.layout, latent.params.std_min)
             latent.set_statistics(mean, std)
 
