@@ -60,7 +60,7 @@ fallen starts only, task weight 0, AMP weight 1, initialized from the last imita
 the point-goal phase starts from its weights.
 
 With the imitator's ``amp`` on, each phase continues the previous phase's discriminator
-(``carry_discriminator``, [P] §4.2: the value function and discriminator are fine-tuned, not
+(``carry_discriminator``, [P] Sec. 3.2 and Alg. 1: the value function and discriminator are fine-tuned, not
 re-initialized); its demo windows come from the new phase's clips.
 
 Not implemented: PNN lateral connections.

@@ -136,7 +136,7 @@ class PMCPParams(BaseModel):
         True,
         description="with the imitator's amp on: each phase (next primitive, P(F)'s get-up and point-goal phases, the "
         "composer) continues the previous phase's AMP discriminator (network, optimizer, update count) instead of a new "
-        "one; its demo windows come from the new phase's clips ([P] §4.2 and [C]: the value function and the "
+        "one; its demo windows come from the new phase's clips ([P] Sec. 3.2 and Alg. 1, and [C]: the value function and the "
         "discriminator are not re-initialized between primitives, only fine-tuned). False: a fresh discriminator per phase",
     )
     composer_form: ComposerForm = Field(
