@@ -560,3 +560,29 @@ def test_each_reward_term_responds_to_its_own_quantity_and_scale_alone(seed, ter
     for other in ("pos", "rot", "vel", "ang_vel"):
         if other != term:
             torch.testing.assert_close(terms[other], torch.ones(3, dtype=F64), atol=1e-9, rtol=0)
+
+
+def test_termination_curriculum_anneals_loose_to_tight_and_resumes(amp, clips):
+    """``termination_curriculum``: the threshold starts at ``start``, moves linearly to the rule's over
+    ``env_steps`` training env steps, then holds; it is part of the env state (exact resume)."""
+    from mocap_phc.termination import curriculum_threshold
+
+    n = 4
+    env = make_env(amp, clips, n=n, termination="code", termination_curriculum={"start": 1.0, "env_steps": 4 * n})
+    env.reset()
+    assert env.termination.threshold == pytest.approx(1.0)
+    zeros = torch.zeros(n, *env.action_space.shape)
+    seen = []
+    for _ in range(6):
+        env.step(zeros)
+        seen.append(env.termination.threshold)
+    assert seen[:4] == pytest.approx([1.0 - 0.75 * k / 4 for k in range(1, 5)]) and seen[4:] == pytest.approx([0.25, 0.25])
+    saved = env.state_dict()
+    other = make_env(amp, clips, n=n, termination="code", termination_curriculum={"start": 1.0, "env_steps": 4 * n})
+    other.reset()
+    other.load_state_dict(saved)
+    assert other.termination.threshold == pytest.approx(0.25) and other._steps_seen == 6 * n
+    plain = make_env(amp, clips, n=n, termination="code")
+    assert plain.termination.threshold is None  # no curriculum: the rule's fixed default
+    assert curriculum_threshold(type("C", (), {"start": 0.5, "env_steps": 10})(), 0.25, 5) == pytest.approx(0.375)
+    env.close(), other.close(), plain.close()

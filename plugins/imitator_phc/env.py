@@ -62,6 +62,8 @@ evaluation methods in :mod:`mocap_phc.env_mining` (a base class of :class:`Imita
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from typing import TYPE_CHECKING, Any, Callable
 
 import torch
@@ -82,7 +84,7 @@ from mocap_phc.amp import AMPHistory, AMPObservation, DiscriminatorTrainer, demo
 from mocap.imitation_rewards import ImitationReward, energy_penalty
 from mocap_phc.env_mining import ClipMining, PolicyFn
 from mocap_phc.observation import PHCObservation, PolicyImitator
-from mocap_phc.termination import Termination
+from mocap_phc.termination import DEFAULT_THRESHOLD, Termination, curriculum_threshold
 
 if TYPE_CHECKING:  # pragma: no cover
     from mocap_phc.imitator import PHCParams
@@ -125,6 +127,7 @@ class ImitationEnv(ClipMining):
         self.action_space = self.action_map.space
         self.obs_dim = self.observation.dim(skeleton.num_bodies)
         self.reward_fn = ImitationReward(p.reward_form, tuple(p.reward_weights), tuple(p.reward_scales))  # type: ignore[arg-type]
+        self._steps_seen = 0  # training env steps of this env (all envs), for the termination curriculum
         self.termination = Termination.for_skeleton(
             skeleton,
             p.termination,
@@ -134,6 +137,9 @@ class ImitationEnv(ClipMining):
             p.fall_check,
             p.fall_height,
         )
+        self._final_threshold = self.termination.threshold if self.termination.threshold is not None else DEFAULT_THRESHOLD[p.termination]
+        if p.termination_curriculum is not None:
+            self.termination = replace(self.termination, threshold=curriculum_threshold(p.termination_curriculum, self._final_threshold, 0))
         self._eval_factory = eval_simulator_factory
         self._eval_sims: dict[int, Simulator] = {}
         self._gen = torch.Generator(device="cpu")
@@ -330,6 +336,9 @@ class ImitationEnv(ClipMining):
             amp_info = {"reward/amp": r_amp, "reward/task": r_task}
         else:
             reward = (r_im + energy).double()
+        self._steps_seen += N
+        if p.termination_curriculum is not None:  # loose to tight (PHCParams.termination_curriculum)
+            self.termination = replace(self.termination, threshold=curriculum_threshold(p.termination_curriculum, self._final_threshold, self._steps_seen))
         terminated, parts = self.termination(state, ref, self.progress)
         if p.fail_states is not None:  # a fallen or far start has a grace window to recover in
             grace = self.recovery_left > 0
@@ -436,6 +445,7 @@ class ImitationEnv(ClipMining):
             "recovery_left": self.recovery_left.cpu().clone(),
             "root_dist": self.root_dist.cpu().clone(),
             "noise_draw": self._noise_draw,
+            "steps_seen": self._steps_seen,
             "noise_due": self._noise_due,
             **(self.start_sampler.state_dict() if self.start_sampler is not None else {}),
             **self.failures.state_dict(),
@@ -464,6 +474,11 @@ class ImitationEnv(ClipMining):
         if "root_dist" in state:
             self.root_dist = state["root_dist"].to(dev).clone()
         self._noise_due = bool(state.get("noise_due", False))
+        self._steps_seen = int(state.get("steps_seen", 0))
+        if self.params.termination_curriculum is not None:
+            self.termination = replace(
+                self.termination, threshold=curriculum_threshold(self.params.termination_curriculum, self._final_threshold, self._steps_seen)
+            )
         if self.start_sampler is not None:
             self.start_sampler.load_state_dict(state)
         if int(state.get("noise_draw", 0)) != self._noise_draw:

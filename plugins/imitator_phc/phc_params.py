@@ -46,6 +46,18 @@ class RecoveryGoalParams(BaseModel):
     )
 
 
+class TerminationCurriculum(BaseModel):
+    """A loose-to-tight termination distance: ``start`` m at the first training step, moving linearly
+    to the rule's threshold over ``env_steps`` env steps (counted by the env over all its envs), then
+    held. Neither PHC's paper nor its code anneals it (fixed 0.5 m mean / 0.25 m any body); loosening
+    early lets the policy practise the rest of a clip it would otherwise lose in its first second
+    (issue lever; the linear form is our choice)."""
+
+    model_config = ConfigDict(extra="forbid")
+    start: float = Field(0.5, gt=0.0, description="m, the threshold at the first training step")
+    env_steps: int = Field(5_000_000, ge=1, description="env steps over which the threshold reaches the rule's")
+
+
 class PHCParams(BaseModel):
     """Parameters of the PHC / PHC+ imitator ([P] paper value, [C] official code value)."""
 
@@ -90,6 +102,11 @@ class PHCParams(BaseModel):
         "'code' = any checked body > threshold (0.25 m) after the first step",
     )
     termination_threshold: float | None = Field(None, gt=0.0, description="m; None: 0.5 for 'paper', 0.25 for 'code'")
+    termination_curriculum: TerminationCurriculum | None = Field(
+        None,
+        description="anneal the termination threshold from `start` to termination_threshold over `env_steps` training "
+        "env steps (None: fixed, as [P] and [C]); the evaluation protocol is not affected",
+    )
     termination_grace: int | None = Field(
         None, ge=0, description="steps after a reset that are never checked; None: 0 for 'paper', 1 for 'code' ([C] progress_buf > 1)"
     )

@@ -19,7 +19,7 @@ also below ``fall_height``.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal, Sequence
+from typing import Any, Literal, Sequence
 
 import torch
 from torch import Tensor
@@ -30,6 +30,14 @@ from mocap.state import HumanoidState, SimState
 TerminationRule = Literal["paper", "code"]
 DEFAULT_THRESHOLD: dict[str, float] = {"paper": 0.5, "code": 0.25}
 DEFAULT_GRACE: dict[str, int] = {"paper": 0, "code": 1}
+
+
+def curriculum_threshold(curriculum: Any, final: float, steps_seen: int) -> float:
+    """The termination threshold after ``steps_seen`` training env steps: linear from
+    ``curriculum.start`` to ``final`` over ``curriculum.env_steps``, then ``final``
+    (:class:`mocap_phc.phc_params.TerminationCurriculum`)."""
+    frac = min(1.0, max(0.0, steps_seen / float(curriculum.env_steps)))
+    return float(curriculum.start + (final - curriculum.start) * frac)
 
 
 def body_distances(sim: HumanoidState, ref: HumanoidState) -> Tensor:
