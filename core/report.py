@@ -92,8 +92,8 @@ def render_report(
     for r in records:
         if not r.result.metrics:
             continue
-        lines += ["", f"## {r.stage} metrics", "", "| metric | value |", "|---|---|"]
-        lines += [f"| {k} | {_fmt(v)} |" for k, v in sorted(r.result.metrics.items())]
+        lines += ["", f"## {r.stage} metrics", "", "| metric | key | value |", "|---|---|---|"]
+        lines += [f"| {metric_label(k)} | `{k}` | {_fmt(v)} |" for k, v in sorted(r.result.metrics.items())]
     if out_dir is not None and (Path(out_dir) / LEARNING_CURVES).is_file():
         lines += ["", "## Learning curves", "", f"![learning curves]({LEARNING_CURVES})"]
     elif plot_note:

@@ -41,7 +41,7 @@ def test_installed_plugin_is_listed(installed, tmp_path):
     assert proc.returncode == 0, proc.stderr
     plugins = {p["name"]: p for p in json.loads(proc.stdout)["plugins"]}
     assert plugins["example"]["package"] == "mocap-example-plugin"
-    assert set(plugins["example"]["registers"]) == {"motion_source:sway", "metric:root_drift"}
+    assert set(plugins["example"]["registers"]) == {"motion_source:sway", "metric:root_drift", "task:face_heading", "latent:tiny_ae"}
 
 
 def test_installed_plugin_is_usable_in_a_spec(installed, tmp_path):
