@@ -62,7 +62,9 @@ class HybridParams(BaseModel):
         "absolute",
         description="'absolute': dead_threshold is an EMA count per batch (vector-quantize-pytorch's threshold_ema_dead_code; "
         "[P] names no threshold); 'relative': a fraction of the mean use per code, batch rows / codebook size (the same "
-        "meaning at every batch size)",
+        "meaning at every batch size). bench/results/quantizer_b512.json (B = 512, the spec's minibatch, 8 x 1024): "
+        "absolute 2 gives relative MSE 0.240 (vector-quantize-pytorch 0.244); relative 0.1 and 1.0 give 0.38 and 0.35, "
+        "so absolute stays the default",
     )
     codebook_init: Literal["kmeans", "random"] = Field(
         "kmeans", description="codebook initialization from the first training batch ([DEFAULT] k-means, as SoundStream)"

@@ -18,22 +18,29 @@ from mocap.testing import check_latent_space, check_task, fake_sim_state, invoke
 
 # fixtures here rather than in a conftest.py, whose module name would clash with mocap's own tests'
 PACKAGE = Path(__file__).resolve().parents[1]
-if str(PACKAGE) not in sys.path:  # the tests also run without installing the package
-    sys.path.insert(0, str(PACKAGE))
 
 
 @pytest.fixture()
 def plugin():
-    """mocap's plugin set with this plugin registered through the same loader as installed ones."""
-    import mocap_example
+    """mocap's plugin set with this plugin registered through the same loader as installed ones.
+
+    Without installing the package, its folder is on ``sys.path`` for the test only: left there, a
+    ``*.egg-info`` folder a local ``pip install`` wrote next to it would make it look installed to
+    every later plugin load in the process."""
     from mocap.plugins import get_plugins
     from mocap.testing import use_plugins
 
     if "face_heading" in get_plugins().names("task"):  # the package is installed: its entry point registered it
         yield get_plugins()
         return
-    with use_plugins(("example_under_test", mocap_example)) as pset:
-        yield pset
+    sys.path.insert(0, str(PACKAGE))
+    try:
+        import mocap_example
+
+        with use_plugins(("example_under_test", mocap_example), entry_points=True) as pset:
+            yield pset
+    finally:
+        sys.path.remove(str(PACKAGE))
 
 
 @pytest.fixture(scope="module")
