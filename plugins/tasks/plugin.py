@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from mocap.hooks import hookimpl
+from mocap.generation import GENERATION_METRICS
 from mocap.metric_display import MetricInfo
 from mocap.plugins import lazy
 from mocap_tasks.task_params import (
@@ -44,17 +45,14 @@ _SHOWN: dict[str, MetricInfo] = {
     "traj_error": MetricInfo("trajectory error", "m"),
     "episode_traj_error": MetricInfo("episode trajectory error", "m"),
     "energy": MetricInfo("energy penalty"),
-    "fall_rate": MetricInfo("fall rate"),
     "keyframe_gmpjpe_mm": MetricInfo("keyframe MPJPE-g", "mm"),
     "keyframe_mpjpe_mm": MetricInfo("keyframe MPJPE-l", "mm"),
     "keyframe_root_error": MetricInfo("keyframe root error", "m"),
     "keyframe_success_rate": MetricInfo("keyframe success rate"),
     "full_gmpjpe_mm": MetricInfo("full MPJPE-g", "mm"),
-    "time_to_fall_s": MetricInfo("time to fall", "s"),
-    "survival_s": MetricInfo("survival time", "s"),
     "down_at_end": MetricInfo("down at the end"),
-    "diversity_m": MetricInfo("diversity", "m"),
     "diversity_episodes": MetricInfo("diversity episodes"),
+    **GENERATION_METRICS,  # fall_rate, time_to_fall_s, survival_s, diversity_m: the same quantities as core's protocol
 }
 _COMMON = ("reward", "steps")
 _GOALS = ("distance", "final_distance", "success_rate", "time_to_reach", "goals")
