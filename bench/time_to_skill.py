@@ -14,6 +14,10 @@ and after (run it on an otherwise idle machine: the curve is wall-clock bound).
 
     python bench/time_to_skill.py --minutes 60 --out bench/results/time_to_skill_after.json
 
+With ``--env-steps N`` the budget is N env steps instead (the trainer's ``total_env_steps``) and the
+snapshots are taken every ``--snapshot-steps`` env steps: an A/B at equal samples, whose outcome
+does not depend on what else shares the cores (the minutes are still recorded).
+
 It measures whatever code ``mocap`` imports: to measure another checkout, run this script with that
 checkout's packages first on ``PYTHONPATH`` (the child inherits it), ``--label`` naming it.
 """
@@ -83,6 +87,54 @@ def train(spec: Path, minutes: float, eval_every: float, checkpoint_every: int, 
     return snaps
 
 
+def train_steps(spec: Path, env_steps: int, snapshot_steps: int, checkpoint_every: int, work: Path, overrides: list[str]) -> list[dict]:
+    """Run the spec for ``env_steps`` env steps; snapshot the newest checkpoint each time it passes a
+    multiple of ``snapshot_steps`` (and at the end); return the snapshots (path, minute, env steps)."""
+    out, store = work / "runs" / "tts", work / "runs" / "artifacts"
+    cmd = [sys.executable, "-m", "mocap", "run", str(spec), "--out", str(out), "--store", str(store), "--set", "eval=null"]
+    cmd += ["--set", f"imitator.trainer.params.checkpoint_every={checkpoint_every}"]
+    cmd += ["--set", f"imitator.trainer.params.total_env_steps={env_steps}"]
+    for o in overrides:
+        cmd += ["--set", o]
+    log = open(work / "train.log", "w")
+    t0 = time.perf_counter()
+    child = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)
+    snaps: list[dict] = []
+    next_mark, seen_mtime = snapshot_steps, 0.0
+    try:
+        while True:
+            done = child.poll() is not None
+            newest = _newest_checkpoint(store)
+            if newest is not None and newest.stat().st_mtime != seen_mtime:
+                seen_mtime = newest.stat().st_mtime
+                tmp = work / "newest.pt"
+                shutil.copy2(newest, tmp)
+                steps = _env_steps(tmp)
+                if steps >= next_mark or (done and (not snaps or snaps[-1]["env_steps"] < steps)):
+                    dst = work / f"snapshot_{steps:010d}" / "ppo.pt"  # mocap eval knows a trainer checkpoint by its name
+                    dst.parent.mkdir(parents=True, exist_ok=True)
+                    shutil.move(tmp, dst)
+                    minutes = (time.perf_counter() - t0) / 60
+                    snaps.append({"minutes": round(minutes, 2), "env_steps": steps, "path": str(dst)})
+                    print(f"[{minutes:5.1f} min] snapshot at {steps / 1e6:.2f}M env steps", flush=True)
+                    while next_mark <= steps:
+                        next_mark += snapshot_steps
+            if done:
+                break
+            time.sleep(5.0)
+    finally:
+        if child.poll() is None:
+            child.send_signal(signal.SIGINT)
+            try:
+                child.wait(timeout=120)
+            except subprocess.TimeoutExpired:
+                child.kill()
+        log.close()
+    if child.returncode not in (0, None):
+        print(f"warning: the training child exited with {child.returncode}; see {work / 'train.log'}", flush=True)
+    return snaps
+
+
 def evaluate(snap: dict, work: Path) -> dict:
     out = Path(snap["path"]).parent / "eval.json"
     subprocess.run([sys.executable, "-m", "mocap", "eval", snap["path"], "--json", str(out)], check=True, capture_output=True)
@@ -129,14 +181,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--spec", type=Path, default=Path("specs/imitator/amp_bundled.yaml"))
     ap.add_argument("--minutes", type=float, default=60.0)
     ap.add_argument("--eval-every", type=float, default=10.0, help="minutes between snapshots")
+    ap.add_argument("--env-steps", type=int, default=None, help="budget in env steps instead of minutes")
+    ap.add_argument("--snapshot-steps", type=int, default=500_000, help="with --env-steps: env steps between snapshots")
     ap.add_argument("--checkpoint-every", type=int, default=2, help="trainer iterations between checkpoints")
     ap.add_argument("--set", dest="overrides", action="append", default=[], help="extra spec override (repeatable)")
     ap.add_argument("--label", default="this checkout")
     ap.add_argument("--workdir", type=Path, default=None, help="keep the run and snapshots here (default: a temporary folder)")
     ap.add_argument("--out", type=Path, default=Path("bench/results/time_to_skill.json"))
     args = ap.parse_args(argv)
-    if args.eval_every <= 0 or args.minutes < args.eval_every:
+    if args.env_steps is None and (args.eval_every <= 0 or args.minutes < args.eval_every):
         ap.error("--eval-every must be > 0 and at most --minutes")
+    if args.env_steps is not None and (args.env_steps <= 0 or args.snapshot_steps <= 0):
+        ap.error("--env-steps and --snapshot-steps must be > 0")
     os.environ.setdefault("MUJOCO_GL", "egl")
     from mocap.checkpoint import hardware, package_versions
 
@@ -144,7 +200,10 @@ def main(argv: list[str] | None = None) -> int:
     work.mkdir(parents=True, exist_ok=True)
     load_before = os.getloadavg()
     started = time.strftime("%Y-%m-%dT%H:%M:%S")
-    snaps = train(args.spec.resolve(), args.minutes, args.eval_every, args.checkpoint_every, work, args.overrides)
+    if args.env_steps is not None:
+        snaps = train_steps(args.spec.resolve(), args.env_steps, args.snapshot_steps, args.checkpoint_every, work, args.overrides)
+    else:
+        snaps = train(args.spec.resolve(), args.minutes, args.eval_every, args.checkpoint_every, work, args.overrides)
     load_after = os.getloadavg()
     points = []
     for snap in snaps:
@@ -155,7 +214,8 @@ def main(argv: list[str] | None = None) -> int:
         "label": args.label,
         "spec": str(args.spec),
         "overrides": args.overrides,
-        "minutes": args.minutes,
+        "minutes": args.minutes if args.env_steps is None else None,
+        "env_steps_budget": args.env_steps,
         "started": started,
         "load_avg_before": load_before,
         "load_avg_at_end_of_training": load_after,
