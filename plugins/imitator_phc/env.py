@@ -19,6 +19,18 @@ Episode (PHC Sec. 3.1; official code phc/env/tasks/humanoid_im.py):
 * ``episodes`` statistics per finished env: ``return``, ``length`` (steps) and ``success`` (1 if
   it was truncated, i.e. reached the time limit or the clip's end without terminating).
 
+The episode mechanics are the shared layer of :mod:`mocap.episodes`: :class:`~mocap.episodes.ReferenceStarts`
+(the RSI draw, the adaptive start sampler, the clamp and the control grid, the clip-end test),
+:class:`~mocap.episodes.EpisodeBook` (``book.steps`` = :attr:`ImitationEnv.progress`, ``book.returns`` =
+:attr:`ImitationEnv.ep_return`, and the end of every step), :class:`~mocap.episodes.TerminationTerms`
+(``tracking``, ``fall``, ``unstable`` of :class:`~mocap_phc.termination.Termination`; the fail-state grace
+window and bonus episodes are applied after it) and :class:`~mocap.episodes.RewardTerms`: the reward is
+``sum_k w_k r_k`` over the terms ``imitation``, ``point`` (PHC Eq. 4's point-goal reward where the root is
+far, with ``recovery_goal.reward == "point"``; ``imitation`` is 0 there), ``energy`` and ``amp`` (with
+``params.amp``), each logged unweighted as ``reward/<name>`` (``reward/imitation`` logs the task reward,
+i.e. the point reward where far). Weights: :meth:`~mocap_phc.imitator.PHCParams.reward_term_weights`,
+replaced term by term by ``params.reward_terms``.
+
 **Hard-negative mining** (PHC+ "soft" mining; PULSE Sec. 4.1, PHC Sec. 3.1 "Hard Negative Mining", PHC
 code ``update_soft_sampling_weight`` in phc/utils/motion_lib_base.py), when
 ``params.hard_negative``: each clip ``c`` has a failure count ``f_c`` (PHC's
@@ -47,6 +59,9 @@ and the step's reward becomes::
     r = w_task r^g + w_amp r^amp + r^energy          (amp_energy_mix "paper", Eq. 1)
     r = w_task (r^g + r^energy) + w_amp r^amp        (amp_energy_mix "code")
 
+(as reward terms the "code" form is summed as ``w_task r^g + w_task r^energy + w_amp r^amp``, which can
+differ from the factored form in the last bit of the float32 sum unless ``w_task`` is a power of two)
+
 with ``r^amp`` from the discriminator as it stood during the rollout; the window is also handed to
 the discriminator trainer as a policy sample. At an episode start (RSI reset) the window is filled
 with the simulator's reset state as the newest frame and the reference clip's frames at
@@ -69,11 +84,12 @@ from typing import TYPE_CHECKING, Any, Callable
 import torch
 from torch import Tensor
 
+from mocap.episodes import EpisodeBook, ReferenceStarts, RewardTerms, TerminationTerms
 from mocap.fail_states import fail_starts, generate_fall_states
 from mocap.hard_negatives import FailureTracker
 from mocap.hard_negatives import failure_weights as hard_negative_weights
 from mocap.interfaces import Simulator
-from mocap.motion.library import MotionLibrary, grid_start_times
+from mocap.motion.library import MotionLibrary
 from mocap.pd_actions import ActionMap, pd_offset_scale
 from mocap.rl.env import StepResult
 from mocap.skeleton import Skeleton
@@ -84,6 +100,7 @@ from mocap_phc.amp import AMPHistory, AMPObservation, DiscriminatorTrainer, demo
 from mocap.imitation_rewards import ImitationReward, energy_penalty
 from mocap_phc.env_mining import ClipMining, PolicyFn
 from mocap_phc.observation import PHCObservation, PolicyImitator
+from mocap_phc.phc_params import REWARD_TERMS
 from mocap_phc.termination import DEFAULT_THRESHOLD, Termination, curriculum_threshold
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -127,6 +144,8 @@ class ImitationEnv(ClipMining):
         self.action_space = self.action_map.space
         self.obs_dim = self.observation.dim(skeleton.num_bodies)
         self.reward_fn = ImitationReward(p.reward_form, tuple(p.reward_weights), tuple(p.reward_scales))  # type: ignore[arg-type]
+        self.reward_terms = _reward_terms(p)
+        self.termination_terms = TerminationTerms(("tracking", "fall", "unstable"))
         self._steps_seen = 0  # training env steps of this env (all envs), for the termination curriculum
         self.termination = Termination.for_skeleton(
             skeleton,
@@ -148,15 +167,14 @@ class ImitationEnv(ClipMining):
         dev = self.device
         self.clip_ids = torch.zeros(N, dtype=torch.long, device=dev)
         self.start_time = torch.zeros(N, dtype=torch.float64, device=dev)
-        self.progress = torch.zeros(N, dtype=torch.long, device=dev)
-        self.ep_return = torch.zeros(N, dtype=torch.float64, device=dev)
+        self.book = EpisodeBook(N, dev)  # steps (progress) and returns of the current episodes
         self.failures = FailureTracker(lib, p)
         if p.control_grid:  # the reference at t0 + k dt becomes a table lookup (start times on the grid)
             lib.use_control_grid(self.dt, p.episode_steps + 2)
-        self._durations = lib.durations.to(dev, torch.float64)
         ss = p.start_sampling
-        self.start_sampler = AdaptiveStartSampler(self._durations, ss) if ss.mode == "adaptive" else None
-        self._loops = lib.loops.to(dev)
+        durations = lib.durations.to(dev, torch.float64)
+        self.start_sampler = AdaptiveStartSampler(durations, ss) if ss.mode == "adaptive" else None
+        self.starts = ReferenceStarts(lib, self.dt, control_grid=p.control_grid, start_sampler=self.start_sampler)
         self._ref_next: MotionFrames | None = None
         self._seen_next: MotionFrames | None = None  # what the policy observed of it (noisy references)
         self._obs: Tensor | None = None
@@ -199,10 +217,30 @@ class ImitationEnv(ClipMining):
             )
 
     # ----------------------------------------------------------------------------- helpers
+    @property
+    def progress(self) -> Tensor:
+        """(N,) long, steps of the current episodes (``book.steps``; read-only)."""
+        return self.book.steps
+
+    @property
+    def ep_return(self) -> Tensor:
+        """(N,) float64, summed reward of the current episodes (``book.returns``; read-only)."""
+        return self.book.returns
+
+    @property
+    def _loops(self) -> Tensor:
+        """(C,) bool, looping clips (``starts.loops``)."""
+        return self.starts.loops
+
+    @property
+    def _durations(self) -> Tensor:
+        """(C,) float64 clip durations, s (``starts.durations``)."""
+        return self.starts.durations
+
     def _ref_at(self, ids: Tensor | None, steps_ahead: int, library: MotionLibrary | None = None) -> MotionFrames:
         c = self.clip_ids if ids is None else self.clip_ids[ids]
         t0 = self.start_time if ids is None else self.start_time[ids]
-        k = self.progress if ids is None else self.progress[ids]
+        k = self.book.steps if ids is None else self.book.steps[ids]
         return (library or self.library).frames(c, t0 + (k + steps_ahead).to(torch.float64) * self.dt)
 
     def _draw_noise(self) -> None:
@@ -235,20 +273,10 @@ class ImitationEnv(ClipMining):
         n = int(ids.numel())
         if n == 0:
             return
-        clips, times = self.library.sample(n, generator=self._gen)
-        clips = clips.to(self.device)
-        t0 = times.to(self.device, torch.float64)
-        if self.start_sampler is not None:  # failure-driven start times within the clip (mocap.start_sampling)
-            t0 = self.start_sampler.sample_times(clips, self._gen).to(self.device)
-        dur = self._durations[clips]
-        latest = torch.where(self._loops[clips], dur, (dur - self.dt).clamp_min(0.0))
-        t0 = torch.minimum(t0, latest)
-        if self.params.control_grid:  # the grid time at or before t0 (looping clips: within the period)
-            t0 = grid_start_times(t0, dur, self._loops[clips], self.dt)
+        clips, t0 = self.starts.sample(n, self._gen)  # RSI (adaptive start times, clamped, on the control grid)
         self.clip_ids[ids] = clips
         self.start_time[ids] = t0
-        self.progress[ids] = 0
-        self.ep_return[ids] = 0.0
+        self.book.start(ids)
         start: HumanoidState = self.library.frames(clips, t0)
         self.recovery_left[ids] = 0
         fs = self.params.fail_states
@@ -302,44 +330,45 @@ class ImitationEnv(ClipMining):
             self._noise_due = False
             self._draw_noise()
         state = self.sim.step(targets)
-        self.progress += 1
+        self.book.tick()  # the energy warm-up and the termination grace read the new step count
 
         r_im, terms = self.reward_fn(state, ref)
         dist = torch.linalg.vector_norm(ref.root_pos.to(torch.float64) - state.root_pos.to(ref.root_pos.device, torch.float64), dim=-1)
         rg = p.recovery_goal
+        point = rg is not None and rg.reward == "point"
         recovery_info: dict[str, Tensor] = {}
+        reward_terms: dict[str, Tensor] = {}
         if rg is not None:
             far = self.root_dist > rg.close_distance
             # diagnostics of fail-state training: share of envs recovering (root far), their root distance
             recovery_info = {"recovery/far": far.float(), "recovery/root_dist_m": dist.float()}
-            if rg.reward == "point":  # PHC Eq. 4: point-goal reward while far
+            if point:  # PHC Eq. 4: the point-goal reward replaces the imitation reward while far
                 from mocap_phc.recovery import point_goal_reward
 
-                r_im = torch.where(far.to(r_im.device), point_goal_reward(self.root_dist, dist, rg.point_form).to(r_im), r_im)
+                far_ = far.to(r_im.device)
+                r_point = point_goal_reward(self.root_dist, dist, rg.point_form).to(r_im)
+                reward_terms["point"] = torch.where(far_, r_point, torch.zeros_like(r_im))
+                reward_terms["imitation"] = torch.where(far_, torch.zeros_like(r_im), r_im)
+                r_im = torch.where(far_, r_point, r_im)  # the task reward (logged as reward/imitation, as before)
+        reward_terms.setdefault("imitation", r_im)
         self.root_dist = dist
-        energy = energy_penalty(state.dof_force, state.dof_vel, p.energy_form, p.energy_coef, self.progress)
-        if rg is not None and rg.reward == "point":  # PHC Eq. 4: 0.1 r^energy while recovering
+        energy = energy_penalty(state.dof_force, state.dof_vel, p.energy_form, p.energy_coef, self.book.steps)
+        if rg is not None and point:  # PHC Eq. 4: 0.1 r^energy while recovering
             energy = torch.where(far.to(energy.device), rg.far_energy_weight * energy, energy)
+        reward_terms["energy"] = energy
         amp_info: dict[str, Tensor] = {}
         if self.amp_trainer is not None:
             assert self.amp_obs is not None and self.amp_history is not None
             self.amp_history.push(self.amp_obs(state))
             window = self.amp_history.flat()
-            r_amp = self.amp_trainer.reward(window).to(r_im.device, r_im.dtype)
+            reward_terms["amp"] = self.amp_trainer.reward(window).to(r_im.device, r_im.dtype)
             self.amp_trainer.observe_policy(window)
-            if p.amp_energy_mix == "code":
-                r_task = r_im + energy
-                reward = (p.task_reward_weight * r_task + p.amp_reward_weight * r_amp).double()
-            else:
-                r_task = r_im
-                reward = (p.task_reward_weight * r_im + p.amp_reward_weight * r_amp + energy).double()
-            amp_info = {"reward/amp": r_amp, "reward/task": r_task}
-        else:
-            reward = (r_im + energy).double()
+            amp_info = {"reward/task": r_im + energy if p.amp_energy_mix == "code" else r_im}
         self._steps_seen += N
         if p.termination_curriculum is not None:  # loose to tight (PHCParams.termination_curriculum)
             self.termination = replace(self.termination, threshold=curriculum_threshold(p.termination_curriculum, self._final_threshold, self._steps_seen))
-        terminated, parts = self.termination(state, ref, self.progress)
+        _, parts = self.termination(state, ref, self.book.steps)
+        terminated, term_info = self.termination_terms(parts)
         if p.fail_states is not None:  # a fallen or far start has a grace window to recover in
             grace = self.recovery_left > 0
             terminated = terminated & (~grace | parts["unstable"])
@@ -349,53 +378,41 @@ class ImitationEnv(ClipMining):
                 terminated = terminated & ~bonus
                 self.recovery_left = torch.where(bonus, torch.full_like(self.recovery_left, p.fail_states.recovery_steps + 1), self.recovery_left)
             self.recovery_left = (self.recovery_left - 1).clamp_min(0)
-        reward = torch.where(parts["unstable"] | ~torch.isfinite(reward), torch.zeros_like(reward), reward)
-        t_next = self.start_time + (self.progress + 1).to(torch.float64) * self.dt
-        clip_over = ~self._loops[self.clip_ids] & (t_next > self._durations[self.clip_ids] + 1e-6)
-        truncated = ((self.progress >= p.episode_steps) | clip_over) & ~terminated
-        done = terminated | truncated
-        self.ep_return += reward
-
-        final_obs = self._observe(state)
-        obs = final_obs
-        episodes: dict[str, Tensor] = {}
-        if bool(done.any()):
-            ids = done.nonzero().squeeze(-1)
-            episodes = {
-                "return": self.ep_return[ids].float().cpu(),
-                "length": self.progress[ids].float().cpu(),
-                "success": truncated[ids].float().cpu(),
-            }
-            self._record(self.clip_ids[ids].cpu(), terminated[ids].cpu())
-            if self.start_sampler is not None:
-                failed = ids[terminated[ids]]
-                fail_t = self.start_time[failed] + self.progress[failed].to(torch.float64) * self.dt
-                self.start_sampler.record_failures(self.clip_ids[failed], fail_t)
-            self._reset_envs(ids)
-            obs = final_obs.clone()
-            obs[ids] = self._observe(self.sim.state, ids)
-        self._obs = obs
+        reward, reward_info = self.reward_terms(reward_terms, unstable=parts["unstable"])  # 0 where unstable or not finite
+        # with the point term, reward/imitation stays the task reward it always logged (the point reward where far)
+        reward_info["reward/imitation"] = r_im
+        t_next = self.start_time + (self.book.steps + 1).to(torch.float64) * self.dt
+        truncated = (self.book.steps >= p.episode_steps) | self.starts.clip_over(self.clip_ids, t_next)
         err = torch.linalg.vector_norm(state.body_pos - ref.body_pos, dim=-1).mean(-1)
         info: dict[str, Any] = {
-            "reward/imitation": r_im,
+            **reward_info,
             **{f"reward/{k}": v for k, v in terms.items()},
-            "reward/energy": energy,
             **amp_info,
             "error/body_pos_m": torch.nan_to_num(err, nan=0.0),
-            "terminated/tracking": parts["tracking"].float(),
-            "terminated/fall": parts["fall"].float(),
-            "terminated/unstable": parts["unstable"].float(),
+            **term_info,
             **recovery_info,
         }
-        return StepResult(
-            obs=obs.clone(),
-            reward=reward.float(),
-            terminated=terminated.clone(),
-            truncated=truncated.clone(),
-            final_obs=final_obs,
+        res = self.book.conclude(
+            reward,
+            terminated,
+            truncated,
+            lambda ids: self._observe(state) if ids is None else self._observe(self.sim.state, ids),
+            self._reset_envs,
             info=info,
-            episodes=episodes,
+            on_finish=self._episodes_finished,
+            count_step=False,
         )
+        self._obs = res.obs.clone()
+        return res
+
+    def _episodes_finished(self, ids: Tensor, failed: Tensor) -> None:
+        """``EpisodeBook.conclude``'s hook before envs ``ids`` are reset: per-clip failure counts (hard
+        negatives) and, with adaptive starts, the clip times at which the ``failed`` ones failed."""
+        self._record(self.clip_ids[ids].cpu(), failed.cpu())
+        if self.start_sampler is not None:
+            bad = ids[failed]
+            fail_t = self.start_time[bad] + self.book.steps[bad].to(torch.float64) * self.dt
+            self.start_sampler.record_failures(self.clip_ids[bad], fail_t)
 
     def close(self) -> None:
         for sim in self._eval_sims.values():
@@ -440,8 +457,8 @@ class ImitationEnv(ClipMining):
             "generator": self._gen.get_state().clone(),
             "clip_ids": self.clip_ids.cpu().clone(),
             "start_time": self.start_time.cpu().clone(),
-            "progress": self.progress.cpu().clone(),
-            "ep_return": self.ep_return.cpu().clone(),
+            "progress": self.book.steps.cpu().clone(),  # the keys of STATE_FORMAT 1 (EpisodeBook's steps/returns)
+            "ep_return": self.book.returns.cpu().clone(),
             "recovery_left": self.recovery_left.cpu().clone(),
             "root_dist": self.root_dist.cpu().clone(),
             "noise_draw": self._noise_draw,
@@ -467,8 +484,7 @@ class ImitationEnv(ClipMining):
         self._gen.set_state(state["generator"].clone())
         self.clip_ids = state["clip_ids"].to(dev).clone()
         self.start_time = state["start_time"].to(dev).clone()
-        self.progress = state["progress"].to(dev).clone()
-        self.ep_return = state["ep_return"].to(dev).clone()
+        self.book.load_state_dict({"steps": state["progress"], "returns": state["ep_return"]})
         if "recovery_left" in state:
             self.recovery_left = state["recovery_left"].to(dev).clone()
         if "root_dist" in state:
@@ -512,6 +528,20 @@ def _assign_rows(dst: HumanoidState, ids: Tensor, src: HumanoidState) -> None:
         d, s = getattr(dst, name, None), getattr(src, name, None)
         if isinstance(d, Tensor) and isinstance(s, Tensor) and d.dim() > 0 and d.numel():
             d[ids] = s.to(d)
+
+
+def _reward_terms(p: "PHCParams") -> RewardTerms:
+    """The env's reward terms (``p.reward_term_weights()``) with the spec's ``reward_terms`` weights."""
+    weights = p.reward_term_weights()
+    absent = sorted(set(p.reward_terms) - set(weights))
+    if absent:
+        needs = {"amp": "amp: true", "point": "recovery_goal.reward: point"}
+        why = "; ".join(f"'{n}' needs {needs[n]}" for n in absent if n in needs)
+        raise ValueError(
+            f"phc.reward_terms: term(s) {', '.join(absent)} not in this configuration (its terms: {', '.join(weights)}; "
+            f"all terms: {', '.join(REWARD_TERMS)}){'; ' + why if why else ''}"
+        )
+    return RewardTerms(weights, p.reward_terms, owner="phc.reward_terms")
 
 
 __all__ = ["ActionMap", "ImitationEnv", "PHCObservation", "PolicyImitator", "hard_negative_weights", "pd_offset_scale"]

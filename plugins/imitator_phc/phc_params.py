@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from mocap.fail_state_params import FailStateParams
 from mocap.imitation_reward_params import DEFAULT_SCALES, DEFAULT_WEIGHTS
@@ -18,6 +18,11 @@ from mocap.start_sampling_params import StartSamplingParams
 if TYPE_CHECKING:  # pragma: no cover
     from mocap.skeleton import Skeleton
     from mocap_phc.env import ActionMap, PHCObservation
+
+
+#: the reward terms of the imitation env (:class:`mocap.episodes.RewardTerms`; which ones a configuration declares:
+#: :meth:`PHCParams.reward_term_weights`)
+REWARD_TERMS = ("imitation", "point", "energy", "amp")
 
 
 class RecoveryGoalParams(BaseModel):
@@ -71,8 +76,7 @@ class PHCParams(BaseModel):
     )
     sixd: Literal["zhou", "tan_norm"] = Field(
         "zhou",
-        description="6-D rotation features: 'zhou' = first two matrix columns ([P], Zhou et al.) or "
-        "'tan_norm' = rotated x and z axes ([C])",
+        description="6-D rotation features: 'zhou' = first two matrix columns ([P], Zhou et al.) or 'tan_norm' = rotated x and z axes ([C])",
     )
     # ------------------------------------------------------------------------------ reward
     reward_form: Literal["paper", "code"] = Field(
@@ -92,8 +96,15 @@ class PHCParams(BaseModel):
         "Fu et al. whom the paper cites), zero for the first 3 steps of an episode. Default 'code': the printed square "
         "gives about -10^3 per step on amp right after RSI (measured), drowning the imitation reward (<= 1)",
     )
-    energy_coef: float = Field(
-        0.0005, ge=0.0, description="energy coefficient c; [P]/[C] primitives 0.0005 ([C] composer/get-up 0.00005); 0 disables"
+    energy_coef: float = Field(0.0005, ge=0.0, description="energy coefficient c; [P]/[C] primitives 0.0005 ([C] composer/get-up 0.00005); 0 disables")
+    reward_terms: dict[str, float] = Field(
+        default_factory=dict,
+        description="reward term name -> weight, replacing that term's default weight in r = sum_k w_k r_k (the env logs "
+        "each unweighted r_k as reward/<name>). Terms: 'imitation' (the imitation reward), 'point' (PHC Eq. 4's point-goal "
+        "reward while far; only with recovery_goal.reward 'point'), 'energy' (the energy penalty), 'amp' (the discriminator "
+        "reward; only with amp). Default weights: 1 each without amp; with amp, amp_energy_mix 'paper' = imitation/point "
+        "task_reward_weight, amp amp_reward_weight, energy 1, and 'code' = imitation/point/energy task_reward_weight, amp "
+        "amp_reward_weight. A term this configuration does not have is an error when the env is built; {} = the defaults",
     )
     # ------------------------------------------------------------------------- termination
     termination: Literal["paper", "code"] = Field(
@@ -113,9 +124,7 @@ class PHCParams(BaseModel):
     termination_exclude: list[str] | None = Field(
         None, description="bodies not checked (RET: ankles and toes); None: the skeleton's feet (smpl: ankles + toes; amp: feet)"
     )
-    fall_check: bool = Field(
-        False, description="also terminate when a non-foot body touches the ground (not PHC imitation; ASE/AMP style)"
-    )
+    fall_check: bool = Field(False, description="also terminate when a non-foot body touches the ground (not PHC imitation; ASE/AMP style)")
     fall_height: float | None = Field(None, gt=0.0, description="with fall_check: only count contacts of bodies below this height, m (ASE: 0.15)")
     # ------------------------------------------------------------------------------ action
     action: Literal["absolute", "residual"] = Field(
@@ -162,17 +171,11 @@ class PHCParams(BaseModel):
         "the goal keeps only the root (a point goal); None: always the full imitation goal (PHC primitives)",
     )
     # ----------------------------------------------------------------------- hard negatives
-    hard_negative: bool = Field(
-        True, description="PHC+ soft hard-negative mining: clip sampling weights follow per-clip failure counts ([C] auto_pmcp_soft)"
-    )
-    hard_negative_floor: float = Field(
-        0.2, ge=0.0, le=1.0, description="share of sampling mass kept on the base weights so that no clip goes to 0 (PHC+: 0)"
-    )
+    hard_negative: bool = Field(True, description="PHC+ soft hard-negative mining: clip sampling weights follow per-clip failure counts ([C] auto_pmcp_soft)")
+    hard_negative_floor: float = Field(0.2, ge=0.0, le=1.0, description="share of sampling mass kept on the base weights so that no clip goes to 0 (PHC+: 0)")
     hard_negative_decay: float = Field(1.0, gt=0.0, le=1.0, description="failure counts are multiplied by this before each update (PHC: 1)")
     update_every: int = Field(256, ge=1, description="finished training episodes between weight updates from their failure rates")
-    eval_every: int = Field(
-        100, ge=0, description="trainer iterations between evaluate_clips runs (every clip from frame 0, deterministic); 0 disables"
-    )
+    eval_every: int = Field(100, ge=0, description="trainer iterations between evaluate_clips runs (every clip from frame 0, deterministic); 0 disables")
     eval_num_envs: int = Field(64, ge=1, description="clips evaluated in parallel by evaluate_clips")
     eval_threshold: float = Field(0.5, gt=0.0, description="evaluate_clips failure: mean body error above this, m ([P]/[C] evaluation 0.5)")
 
@@ -206,9 +209,7 @@ class PHCParams(BaseModel):
         2e-5, gt=0.0, description="discriminator Adam learning rate ([C] it shares the policy optimizer, PHC+ lr 2e-5; small CPU runs want ~1e-4)"
     )
     amp_batch: int = Field(512, ge=2, description="demo and policy windows per discriminator step ([C] amp_batch_size 512)")
-    amp_updates_per_iteration: int = Field(
-        5, ge=0, description="discriminator steps per PPO iteration ([C]: one per PPO minibatch step; [I] 5)"
-    )
+    amp_updates_per_iteration: int = Field(5, ge=0, description="discriminator steps per PPO iteration ([C]: one per PPO minibatch step; [I] 5)")
     amp_grad_penalty: float | None = Field(None, ge=0.0, description="None: 10 for lsgan (applied as w/2) and 5 for bce")
     amp_reward_scale: float | None = Field(None, gt=0.0, description="None: 1 for lsgan, 2 for bce ([C] disc_reward_scale)")
     task_reward_weight: float = Field(0.5, ge=0.0, description="w_task ([P]/[C] 0.5)")
@@ -222,6 +223,28 @@ class PHCParams(BaseModel):
     amp_replay_keep_prob: float = Field(0.01, gt=0.0, le=1.0, description="keep probability once the replay buffer has filled ([C] 0.01)")
     amp_demo_buffer_size: int = Field(200_000, ge=1, description="demo-window ring buffer, refilled with amp_batch fresh windows per step ([C] 200,000)")
 
+    @field_validator("reward_terms")
+    @classmethod
+    def _known_reward_terms(cls, value: dict[str, float]) -> dict[str, float]:
+        unknown = sorted(set(value) - set(REWARD_TERMS))
+        if unknown:
+            raise ValueError(f"unknown reward term(s) {', '.join(unknown)}; the terms are {', '.join(REWARD_TERMS)}")
+        return value
+
+    def reward_term_weights(self) -> dict[str, float]:
+        """The default weights of the reward terms this configuration declares, in summation order
+        (the order reproduces the env's historical float arithmetic; ``reward_terms`` overrides them)."""
+        point = self.recovery_goal is not None and self.recovery_goal.reward == "point"
+        task = self.task_reward_weight if self.amp else 1.0
+        weights = {"imitation": task, **({"point": task} if point else {})}
+        if not self.amp:
+            weights["energy"] = 1.0
+        elif self.amp_energy_mix == "code":  # w_task (r^g + r^energy) + w_amp r^amp
+            weights.update(energy=task, amp=self.amp_reward_weight)
+        else:  # Eq. 1: w_task r^g + w_amp r^amp + r^energy
+            weights.update(amp=self.amp_reward_weight, energy=1.0)
+        return weights
+
     def observation(self) -> PHCObservation:
         from mocap_phc.env import PHCObservation
 
@@ -233,4 +256,4 @@ class PHCParams(BaseModel):
         return ActionMap.for_skeleton(skeleton, self.action, self.action_clip, self.action_scale_overrides)
 
 
-__all__ = ["PHCParams", "RecoveryGoalParams"]
+__all__ = ["REWARD_TERMS", "PHCParams", "RecoveryGoalParams"]
