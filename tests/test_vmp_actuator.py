@@ -320,7 +320,11 @@ def test_tracking_env_with_randomization_and_actuator_model_resumes_exactly(amp)
         out = a.step(act)
         pushed |= bool(a.sim.external_wrench.abs().sum() > 0)
         tau = a.sim.state.dof_force
-        torch.testing.assert_close(out.info["reward/smooth/tau"], -1e-5 * tau.square().sum(-1), rtol=1e-4, atol=1e-6)
+        # logged unweighted (|tau|^2); the reward weighs it with -c_tau
+        torch.testing.assert_close(out.info["reward/smooth/tau"], tau.square().sum(-1), rtol=1e-4, atol=1e-1)
+        total = sum(w * out.info[f"reward/{k}"].double() for k, w in a.rewards.weights.items())
+        assert a.rewards.weights["smooth/tau"] == -1e-5
+        torch.testing.assert_close(out.reward.double(), total, rtol=1e-5, atol=1e-4)
     assert pushed
     b.load_state_dict(a.state_dict())
     torch.testing.assert_close(b.randomizer.mass_scale, a.randomizer.mass_scale)

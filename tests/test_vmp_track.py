@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 
 torch.set_num_threads(1)
 
+from mocap.episodes import RewardTerms
 from mocap.motion.deepmimic import DeepMimicParams, DeepMimicSource
 from mocap.motion.library import MotionLibrary
 from mocap.state import Trajectories
@@ -36,7 +37,8 @@ from mocap_vmp.tracking import (
     tracking_errors,
     update_counter,
     vmp_imitator,
-    vmp_reward,
+    vmp_reward_terms,
+    vmp_reward_weights,
 )
 
 TINY = {
@@ -84,16 +86,62 @@ def _frame(draw_vec, n):
 
 
 # --------------------------------------------------------------------------------- reward terms
-def test_exp_reward_form_in_the_env(amp, lib, latent):
-    env = _env(amp, lib, latent, n=2, reward_form="exp", exp_scale=2.0, reward={"alive": 0.0})
-    p = env.params
+def _weighted_sum(weights, info):
+    """sum_k w_k r_k of the logged (unweighted) terms, float64."""
+    return sum(w * info[f"reward/{k}"].double() for k, w in weights.items())
+
+
+@pytest.mark.parametrize("form", ["paper", "exp"])
+def test_logged_reward_terms_are_the_unweighted_formulas_and_sum_to_the_reward(amp, lib, latent, form):
+    """Each ``reward/<term>`` is the raw term (alive 1, e_g or its kernel, e_s); the step's reward is
+    their sum weighted by VmpRewardWeights (-c_g or +c_g, -c_s, c_alive)."""
+    env = _env(amp, lib, latent, n=2, reward_form=form, exp_scale=2.0)
+    p, cond = env.params, env.cond
     env.reset()
-    res = env.step(torch.zeros(2, env.num_actions))
-    for g in ("h", "theta", "v", "q", "qd", "p"):
-        v = res.info[f"reward/track/{g}"]
-        assert bool((v >= 0).all()) and bool((v <= getattr(p.reward, g) + 1e-6).all())
-    assert bool(torch.isfinite(res.reward).all())
+    g = torch.Generator().manual_seed(4)
+    for _ in range(3):
+        ref, hist = env._ref_feat.clone(), env.hist_targets.clone()
+        res = env.step(0.1 * torch.randn(2, env.num_actions, generator=g))
+        assert not bool((res.terminated | res.truncated).any())  # env.sim.state is the stepped state
+        st_ = env.sim.state
+        sim = state_features(st_, cond.ee_index).to(ref)
+        track = tracking_errors(cond.reward_standardize(ref), cond.reward_standardize(sim), env.layout)
+        assert torch.equal(res.info["reward/alive"], torch.ones(2))
+        for gr, e in track.items():
+            want = e if form == "paper" else torch.exp(-2.0 * e / env.track_dims[gr])
+            torch.testing.assert_close(res.info[f"reward/track/{gr}"], want, rtol=1e-5, atol=1e-6)
+        if form == "exp":
+            v = torch.stack([res.info[f"reward/track/{gr}"] for gr in track])
+            assert bool((v >= 0).all()) and bool((v <= 1).all())
+        a = env.hist_targets[:, 0]  # this step's PD targets (smoothness_on: targets)
+        torch.testing.assert_close(res.info["reward/smooth/da"], (a - hist[:, 0]).square().sum(-1))
+        torch.testing.assert_close(res.info["reward/smooth/dda"], (a - 2 * hist[:, 0] + hist[:, 1]).square().sum(-1))
+        torch.testing.assert_close(res.info["reward/smooth/tau"], st_.dof_force.float().square().sum(-1), rtol=1e-5, atol=1e-3)
+        weights = env.rewards.weights
+        assert weights == vmp_reward_weights(p.reward, form)
+        assert weights["track/q"] == (-1.0 if form == "paper" else 1.0) and weights["smooth/tau"] == -1e-5
+        torch.testing.assert_close(res.reward.double(), _weighted_sum(weights, res.info), rtol=1e-5, atol=1e-4)
     env.close()
+
+
+@pytest.mark.parametrize("form", ["paper", "exp"])
+def test_reward_weights_from_the_params_reach_the_env_reward(amp, lib, latent, form):
+    """Changed VmpRewardWeights: the same raw terms (the dynamics do not see the reward), the reward
+    their sum with the new weights."""
+    changed = {"h": 2.0, "qd": 0.0, "p": 0.25, "alive": 3.0, "da": 0.5, "tau": 1e-3}
+    a, b = _env(amp, lib, latent, n=2, seed=2, reward_form=form), _env(amp, lib, latent, n=2, seed=2, reward_form=form, reward=changed)
+    assert b.rewards.weights["alive"] == 3.0 and b.rewards.weights["smooth/tau"] == -1e-3
+    assert b.rewards.weights["track/h"] == (-2.0 if form == "paper" else 2.0) and b.rewards.weights["track/qd"] == 0.0
+    a.reset(), b.reset()
+    g = torch.Generator().manual_seed(5)
+    for _ in range(4):
+        act = 0.2 * torch.randn(2, a.num_actions, generator=g)
+        ra, rb = a.step(act), b.step(act)
+        for k in a.rewards.names:
+            assert torch.equal(ra.info[f"reward/{k}"], rb.info[f"reward/{k}"])
+        torch.testing.assert_close(rb.reward.double(), _weighted_sum(b.rewards.weights, rb.info), rtol=1e-5, atol=1e-4)
+        assert not torch.equal(ra.reward, rb.reward)
+    a.close(), b.close()
 
 
 # --------------------------------------------------------------------------------- termination
@@ -252,12 +300,9 @@ def test_reward_is_alive_bonus_when_tracking_is_perfect(amp, lib, latent):
     fa = env.cond.reward_standardize(state_features(ref, env.cond.ee_index))
     track = tracking_errors(fa, fa, env.layout)
     a = torch.zeros(2, env.num_actions)
-    total, _ = vmp_reward(
-        track,
-        smoothness_errors(a, a, a, torch.zeros(2, env.num_actions)),
-        env.params.reward,
-    )
-    assert torch.allclose(total, torch.full((2,), 6.0))
+    terms = vmp_reward_terms(track, smoothness_errors(a, a, a, torch.zeros(2, env.num_actions)))
+    total, _ = RewardTerms(vmp_reward_weights(env.params.reward))(terms)
+    assert torch.allclose(total, torch.full((2,), 6.0, dtype=f64))
     env.close()
 
 

@@ -57,6 +57,9 @@ feature dimensions and ``k = exp_scale`` (alive and smoothness terms unchanged).
 far below zero until the policy tracks (about -86 per step here at the start against the +6
 alive bonus), so on a small CPU budget its signal is mostly the clamp at zero; the kernel keeps a
 gradient everywhere, as DeepMimic / PHC rewards do.
+The sum is a :class:`mocap.episodes.RewardTerms` over the terms ``alive`` (1), ``track/<g>`` (``e_g``
+or the kernel) and ``smooth/<s>`` (``e_s``) with the weights above (``vmp_reward_weights``); each
+term is logged unweighted as ``reward/<term>``.
 
 Both sides of the tracking terms are features of :func:`state_features` in their own heading
 frame, standardized with the VAE's statistics [P], the std floored at ``reward_std_min`` (0.05 in
@@ -116,6 +119,7 @@ from mocap_vmp.tracking_params import (
     conditioning_spec,
 )
 from mocap_vmp.tracking_reward import (
+    REWARD_TERMS,
     SMOOTH_TERMS,
     TRACK_TERMS,
     end_effector_error,
@@ -124,8 +128,8 @@ from mocap_vmp.tracking_reward import (
     state_features,
     tracking_errors,
     update_counter,
-    vmp_reward,
-    vmp_reward_exp,
+    vmp_reward_terms,
+    vmp_reward_weights,
 )
 
 
@@ -329,6 +333,7 @@ def make_vmp_tracker(
 
 
 __all__ = [
+    "REWARD_TERMS",
     "SMOOTH_TERMS",
     "STATE_FORMAT",
     "TRACK_TERMS",
@@ -353,6 +358,6 @@ __all__ = [
     "tracking_errors",
     "update_counter",
     "vmp_imitator",
-    "vmp_reward",
-    "vmp_reward_exp",
+    "vmp_reward_terms",
+    "vmp_reward_weights",
 ]

@@ -1,5 +1,7 @@
 """VMP stage II training environment: :class:`VmpTrackingEnv`, N tracking episodes as a
-:class:`mocap.rl.env.VecEnv` (RSI, reference jumps, reward, termination, resume state).
+:class:`mocap.rl.env.VecEnv` (RSI, reference jumps, reward, termination, resume state), on the
+shared episode layer (:mod:`mocap.episodes`: the reference starts, the named reward and termination
+terms, the episode counters and the end of every step).
 
 Moved out of :mod:`mocap_vmp.tracking` (re-exported there); the design is described in that
 module's docstring."""
@@ -12,7 +14,7 @@ from typing import Any
 import torch
 from torch import Tensor
 
-from mocap.motion.library import grid_start_times
+from mocap.episodes import EpisodeBook, ReferenceStarts, RewardTerms, TerminationTerms
 from mocap.observations import proprioception, proprioception_dim
 from mocap.rl.env import StepResult
 from mocap.skeleton import Skeleton
@@ -29,8 +31,9 @@ from mocap_vmp.tracking_reward import (
     state_features,
     tracking_errors,
     update_counter,
-    vmp_reward,
-    vmp_reward_exp,
+    vmp_reward_terms,
+    vmp_reward_weights,
+    weighted_total,
 )
 
 STATE_FORMAT = "mocap_vmp.tracking_env/1"
@@ -79,12 +82,18 @@ class VmpTrackingEnv:
         self.track_dims = {g: sl.stop - sl.start for g, sl in self.layout.slices.items() if g in TRACK_TERMS}
         self._gen = torch.Generator(device="cpu")
         self._gen.manual_seed(int(seed))
-        self._dur = lib._dur64.to(dev)
+        # RSI and reference jumps; every clip non-looping (at a clip's end the reference jumps or the episode ends)
+        self.starts = ReferenceStarts(lib, self.dt, control_grid=True, loops=False)
+        # the exact (float64) clip durations: ReferenceStarts takes library.durations, rounded to the library's dtype
+        # (float32), which moves the clamp at duration - dt below the grid point and drops a clip's last start frame
+        self.starts.durations = lib._dur64.to(dev)
+        # reward: the raw terms of tracking_reward.REWARD_TERMS weighted by the params' VmpRewardWeights
+        self.rewards = RewardTerms(vmp_reward_weights(p.reward, p.reward_form), owner="reward")
+        self.terminations = TerminationTerms(("ee", "unstable"))
+        self.book = EpisodeBook(N, dev)  # steps / returns: the state's "progress" / "ep_return"
         self.clip_ids = torch.zeros(N, dtype=torch.long, device=dev)
         self.target_time = torch.zeros(N, dtype=torch.float64, device=dev)
-        self.progress = torch.zeros(N, dtype=torch.long, device=dev)
         self.ee_counter = torch.zeros(N, dtype=torch.long, device=dev)
-        self.ep_return = torch.zeros(N, dtype=torch.float64, device=dev)
         self.jumps = torch.zeros(N, dtype=torch.long, device=dev)
         self.hist_actions = torch.zeros(N, 2, A, device=dev)  # raw actions a_{t-1}, a_{t-2}
         self.hist_targets = torch.zeros(N, 2, A, device=dev)  # PD targets of the same steps
@@ -115,23 +124,15 @@ class VmpTrackingEnv:
         parts.append(_clean(cond))
         return torch.cat(parts, -1)
 
-    def _sample_refs(self, n: int) -> tuple[Tensor, Tensor]:
-        clips, times = self.library.sample(n, generator=self._gen)
-        clips = clips.to(self.device)
-        dur = self._dur[clips]
-        t0 = torch.minimum(times.to(self.device, torch.float64), (dur - self.dt).clamp_min(0.0))
-        return clips, grid_start_times(t0, dur, torch.zeros_like(clips, dtype=torch.bool), self.dt)
-
     def _reset_envs(self, ids: Tensor) -> None:
         n = int(ids.numel())
         if n == 0:
             return
-        clips, t0 = self._sample_refs(n)
+        clips, t0 = self.starts.sample(n, self._gen)
         self.clip_ids[ids] = clips
         self.target_time[ids] = t0 + self.dt
-        self.progress[ids] = 0
+        self.book.start(ids)
         self.ee_counter[ids] = 0
-        self.ep_return[ids] = 0.0
         self.jumps[ids] = 0
         if self.randomizer is not None:
             self.randomizer.on_reset(ids.cpu())
@@ -159,7 +160,7 @@ class VmpTrackingEnv:
         if self.randomizer is not None:
             self.randomizer.before_step()
         state = self.sim.step(targets)
-        self.progress += 1
+        self.book.tick()
 
         layout, cond = self.layout, self.cond
         sim_feat = state_features(state, cond.ee_index).to(self._ref_feat)
@@ -171,73 +172,51 @@ class VmpTrackingEnv:
         x, hist = (targets, self.hist_targets) if p.smoothness_on == "targets" else (a, self.hist_actions)
         tau = state.dof_force.to(a) if state.dof_force.numel() else state.dof_force
         smooth = smoothness_errors(x.float(), hist[:, 0], hist[:, 1], tau)
-        if p.reward_form == "exp":
-            reward, terms = vmp_reward_exp(track, smooth, p.reward, self.track_dims, p.exp_scale)
-        else:
-            reward, terms = vmp_reward(track, smooth, p.reward)
-        if p.only_positive_rewards:
-            reward = reward.clamp_min(0.0)
+        terms = vmp_reward_terms(track, smooth, p.reward_form, self.track_dims, p.exp_scale)
         ps = layout.slices["p"]
         ee_err = end_effector_error(self._ref_feat[:, ps], sim_feat[:, ps], p.termination_norm)
         ee_err = torch.nan_to_num(ee_err, nan=math.inf)
         self.ee_counter, fired = update_counter(self.ee_counter, ee_err, p.termination_threshold, self.persist)
         unstable = state.unstable.to(self.device).bool() if state.unstable.numel() else torch.zeros(N, dtype=torch.bool, device=self.device)
-        unstable = unstable | ~torch.isfinite(reward)
-        reward = torch.where(unstable, torch.zeros_like(reward), reward).double()
-        terminated = fired | unstable
-        self.ep_return += reward
+        # a reward that is not finite (after the only_positive clip) marks the env unstable: it ends the episode
+        total = weighted_total(terms, self.rewards.weights)
+        unstable = unstable | ~torch.isfinite(total.clamp_min(0.0) if p.only_positive_rewards else total)
+        reward, reward_info = self.rewards(terms, unstable)  # (N,) float64, 0 where unstable or not finite
+        if p.only_positive_rewards:
+            reward = reward.clamp_min(0.0)
+        terminated, term_info = self.terminations({"ee": fired, "unstable": unstable})
         self.hist_actions = torch.stack((a, self.hist_actions[:, 0]), 1)
         self.hist_targets = torch.stack((targets.float(), self.hist_targets[:, 0]), 1)
         dq = (self._ref_dof - state.dof_pos.to(self._ref_dof)).abs().mean(-1)
 
         # the reference advances one step; at a clip's end it jumps (no simulator reset) or the episode ends
         self.target_time += self.dt
-        clip_over = self.target_time > self._dur[self.clip_ids] + 1e-6
-        truncated = self.progress >= self.episode_steps
+        clip_over = self.starts.clip_over(self.clip_ids, self.target_time)
+        truncated = self.book.steps >= self.episode_steps
         if p.reference_jump:
             jump = clip_over & ~terminated & ~truncated
             if bool(jump.any()):
                 ids = jump.nonzero().squeeze(-1)
-                clips, t = self._sample_refs(int(ids.numel()))
+                clips, t = self.starts.sample(int(ids.numel()), self._gen)
                 self.clip_ids[ids] = clips
                 self.target_time[ids] = t
                 self.jumps[ids] += 1
         else:
             truncated = truncated | clip_over
-        truncated = truncated & ~terminated
-        done = terminated | truncated
-
-        final_obs = self._observe(state)
-        obs = final_obs
-        episodes: dict[str, Tensor] = {}
-        if bool(done.any()):
-            ids = done.nonzero().squeeze(-1)
-            episodes = {
-                "return": self.ep_return[ids].float().cpu(),
-                "length": self.progress[ids].float().cpu(),
-                "success": truncated[ids].float().cpu(),
-            }
-            self._reset_envs(ids)
-            obs = final_obs.clone()
-            obs[ids] = self._observe(self.sim.state, ids)
-        self._obs = obs
         info: dict[str, Any] = {
-            **{f"reward/{k}": v.float() for k, v in terms.items()},
+            **{k: v.float() for k, v in reward_info.items()},
             "error/ee_max_m": torch.nan_to_num(ee_err, posinf=0.0),
             "error/joint_mae_deg": torch.nan_to_num(dq, nan=0.0) * (180.0 / math.pi),
-            "terminated/ee": fired.float(),
-            "terminated/unstable": unstable.float(),
+            **term_info,
             "reference_jumps": clip_over.float(),
         }
-        return StepResult(
-            obs=obs.clone(),
-            reward=reward.float(),
-            terminated=terminated.clone(),
-            truncated=truncated.clone(),
-            final_obs=final_obs,
-            info=info,
-            episodes=episodes,
-        )
+
+        def observe(ids: Tensor | None) -> Tensor:
+            return self._observe(state) if ids is None else self._observe(self.sim.state, ids)
+
+        res = self.book.conclude(reward, terminated, truncated, observe, self._reset_envs, info=info, count_step=False)
+        self._obs = res.obs.clone()
+        return res
 
     def close(self) -> None:
         self.sim.close()
@@ -258,6 +237,8 @@ class VmpTrackingEnv:
             "clip_names": list(self.library.clip_names),
             "generator": self._gen.get_state().clone(),
             **{k: getattr(self, k).cpu().clone() for k in _COUNTERS},
+            "progress": self.book.steps.cpu().clone(),
+            "ep_return": self.book.returns.cpu().clone(),
         }
         sd.update(save_sim_state(self.sim))
         if self.randomizer is not None:
@@ -274,18 +255,18 @@ class VmpTrackingEnv:
         self._gen.set_state(state["generator"].clone())
         for k in _COUNTERS:
             setattr(self, k, state[k].to(self.device).clone())
+        self.book.load_state_dict({"steps": state["progress"], "returns": state["ep_return"]})
         load_sim_state(self.sim, torch.arange(self.num_envs), state, self.device)
         if self.randomizer is not None and "randomization" in state:
             self.randomizer.load_state_dict(state["randomization"])
         self._obs = self._observe(self.sim.state)
 
 
+# per-env state besides the episode book's (saved as "progress" and "ep_return")
 _COUNTERS = (
     "clip_ids",
     "target_time",
-    "progress",
     "ee_counter",
-    "ep_return",
     "jumps",
     "hist_actions",
     "hist_targets",

@@ -1,5 +1,6 @@
 """VMP stage II reward and termination: the per-frame state features both sides are compared
-on, the Eq. 5-8 tracking / smoothness errors and rewards, and the end-effector persistence rule.
+on, the Eq. 5-8 tracking / smoothness errors, the reward's named terms and their weights (summed by
+:class:`mocap.episodes.RewardTerms`), and the end-effector persistence rule.
 
 Moved out of :mod:`mocap_vmp.tracking` (re-exported there); the design is described in that
 module's docstring."""
@@ -64,33 +65,57 @@ def smoothness_errors(a: Tensor, a1: Tensor, a2: Tensor, tau: Tensor) -> dict[st
     }
 
 
-def _reward_total(
-    track_terms: dict[str, Tensor], smooth: dict[str, Tensor], w: VmpRewardWeights
-) -> tuple[Tensor, dict[str, Tensor]]:
-    """``c_alive + sum of the weighted tracking terms - sum_s c_s e_s`` and every term by name."""
-    any_t = next(iter(track_terms.values()))
-    terms: dict[str, Tensor] = {"alive": torch.full_like(any_t, float(w.alive))}
-    terms.update({f"track/{g}": v for g, v in track_terms.items()})
-    terms.update({f"smooth/{k}": -float(getattr(w, k)) * e for k, e in smooth.items()})
-    total = terms["alive"].clone()
-    for v in list(terms.values())[1:]:
-        total = total + v
-    return total, terms
+#: the reward's terms (:class:`mocap.episodes.RewardTerms`), in the order they are summed
+REWARD_TERMS: tuple[str, ...] = ("alive", *(f"track/{g}" for g in TRACK_TERMS), *(f"smooth/{s}" for s in SMOOTH_TERMS))
 
 
-def vmp_reward(track: dict[str, Tensor], smooth: dict[str, Tensor], w: VmpRewardWeights) -> tuple[Tensor, dict[str, Tensor]]:
-    """Eq. 5: ``r = -sum_g c_g e_g + c_alive - sum_s c_s e_s``; returns the total and each weighted term
-    (``track/<g>``, ``alive``, ``smooth/<s>``; all but ``alive`` are <= 0)."""
-    return _reward_total({g: -float(getattr(w, g)) * e for g, e in track.items()}, smooth, w)
+def vmp_reward_weights(w: VmpRewardWeights, form: str = "paper") -> dict[str, float]:
+    """The weight of every term of :data:`REWARD_TERMS`: ``c_alive``, ``-c_g`` (``form`` 'paper', Eq. 6)
+    or ``+c_g`` ('exp') for the tracking terms, ``-c_s`` for the smoothness terms (Eq. 8)."""
+    if form not in ("paper", "exp"):
+        raise ValueError(f"unknown reward_form {form!r}")
+    sign = 1.0 if form == "exp" else -1.0
+    out = {"alive": float(w.alive)}
+    out.update({f"track/{g}": sign * float(getattr(w, g)) for g in TRACK_TERMS})
+    out.update({f"smooth/{s}": -float(getattr(w, s)) for s in SMOOTH_TERMS})
+    return out
 
 
-def vmp_reward_exp(
-    track: dict[str, Tensor], smooth: dict[str, Tensor], w: VmpRewardWeights, dims: dict[str, int], scale: float
-) -> tuple[Tensor, dict[str, Tensor]]:
-    """``reward_form: exp``: ``r = sum_g c_g exp(-scale e_g / n_g) + c_alive - sum_s c_s e_s`` with
-    ``n_g = dims[g]``; same term names as :func:`vmp_reward` (``track/<g>`` here in [0, c_g])."""
-    kernels = {g: float(getattr(w, g)) * torch.exp(-scale * e / max(int(dims[g]), 1)) for g, e in track.items()}
-    return _reward_total(kernels, smooth, w)
+def vmp_reward_terms(
+    track: dict[str, Tensor],
+    smooth: dict[str, Tensor],
+    form: str = "paper",
+    dims: dict[str, int] | None = None,
+    scale: float = 2.0,
+) -> dict[str, Tensor]:
+    """The unweighted terms (N,) of :data:`REWARD_TERMS`: ``alive`` = 1, ``track/<g>`` = the squared
+    error ``e_g`` ('paper') or the kernel ``exp(-scale e_g / n_g)`` with ``n_g = dims[g]`` ('exp', in
+    (0, 1]), ``smooth/<s>`` = ``e_s``. With :func:`vmp_reward_weights` the weighted sum is Eq. 5:
+    ``r = c_alive - sum_g c_g e_g - sum_s c_s e_s`` ('paper') or with ``+ sum_g c_g exp(..)`` ('exp')."""
+    if form not in ("paper", "exp"):
+        raise ValueError(f"unknown reward_form {form!r}")
+    if form == "exp" and dims is None:
+        raise ValueError("reward_form 'exp' needs the feature dimensions of the tracking groups (dims)")
+    any_t = track[TRACK_TERMS[0]]
+    terms: dict[str, Tensor] = {"alive": torch.ones_like(any_t)}
+    for g in TRACK_TERMS:
+        e = track[g]
+        terms[f"track/{g}"] = e if form == "paper" else torch.exp(-scale * e / max(int(dims[g]), 1))  # type: ignore[index]
+    terms.update({f"smooth/{s}": smooth[s] for s in SMOOTH_TERMS})
+    return terms
+
+
+def weighted_total(terms: dict[str, Tensor], weights: dict[str, float]) -> Tensor:
+    """``sum_k w_k r_k`` in the order of ``weights``, before any zeroing: the same operations as
+    :class:`mocap.episodes.RewardTerms` (which returns 0 where this is not finite; the tracking env
+    needs to know where, since a non-finite reward also ends the episode)."""
+    total: Tensor | None = None
+    for name, w in weights.items():
+        v = terms[name]
+        part = v if w == 1.0 else w * v
+        total = part if total is None else total + part
+    assert total is not None
+    return total
 
 
 # ------------------------------------------------------------------------------- termination
@@ -115,4 +140,3 @@ def update_counter(counter: Tensor, error: Tensor, threshold: float, steps: int)
     over = error > threshold
     counter = torch.where(over, counter + 1, torch.zeros_like(counter))
     return counter, counter >= steps
-
