@@ -1,6 +1,12 @@
 """The episode bookkeeping of online distillation (:mod:`mocap.distill`): reference-state starts on
 the control grid, optional fallen / far starts and bonus recovery episodes (:mod:`mocap.fail_states`),
-termination and truncation, per-clip failure counts for hard negatives, and an exact state dict."""
+termination and truncation, per-clip failure counts for hard negatives, and an exact state dict.
+
+Built on the shared episode layer (:mod:`mocap.episodes`): :class:`~mocap.episodes.ReferenceStarts`
+draws the starts (clip, clamped time, control grid) and says when a non-looping clip is over;
+:class:`~mocap.episodes.TerminationTerms` ORs the terms ``tracking`` (body error above the threshold
+after the grace steps, outside a recovery window, not a bonus episode) and ``unstable``. There are
+no rewards, so no :class:`~mocap.episodes.EpisodeBook`: the step counter is :attr:`DistillEpisodes.progress`."""
 
 from __future__ import annotations
 
@@ -9,16 +15,16 @@ from typing import TYPE_CHECKING, Any
 import torch
 from torch import Tensor
 
+from mocap.episodes import ReferenceStarts, TerminationTerms
 from mocap.fail_states import fail_starts, generate_fall_states
 from mocap.hard_negatives import FailureTracker
 from mocap.interfaces import Simulator
-from mocap.motion.library import MotionLibrary, grid_start_times
+from mocap.motion.library import MotionLibrary
 from mocap.sim_snapshot import load_sim_state, save_sim_state
 from mocap.state import HumanoidState, MotionFrames, SimState
 
 if TYPE_CHECKING:  # pragma: no cover
     from mocap.distill import DistillParams
-
 
 
 class DistillEpisodes:
@@ -37,8 +43,8 @@ class DistillEpisodes:
         self.start_time = torch.zeros(N, dtype=torch.float64, device=dev)
         self.progress = torch.zeros(N, dtype=torch.long, device=dev)
         self.failures = FailureTracker(lib, params)
-        self._durations = lib.durations.to(dev, torch.float64)
-        self._loops = lib.loops.to(dev)
+        self.starts = ReferenceStarts(lib, self.dt, control_grid=p.control_grid)
+        self.termination = TerminationTerms(("tracking", "unstable"))
         self.threshold = p.termination_threshold
         self.recovery_left = torch.zeros(N, dtype=torch.long, device=dev)
         if p.control_grid:
@@ -53,13 +59,7 @@ class DistillEpisodes:
         n = int(ids.numel())
         if n == 0:
             return
-        clips, times = self.library.sample(n, generator=self.gen)
-        t0 = times.to(torch.float64)
-        dur = self._durations[clips]
-        latest = torch.where(self._loops[clips], dur, (dur - self.dt).clamp_min(0.0))
-        t0 = torch.minimum(t0, latest)
-        if self.params.control_grid:
-            t0 = grid_start_times(t0, dur, self._loops[clips], self.dt)
+        clips, t0 = self.starts.sample(n, self.gen)
         self.clip_ids[ids] = clips
         self.start_time[ids] = t0
         self.progress[ids] = 0
@@ -96,9 +96,9 @@ class DistillEpisodes:
                 failed = failed & ~bonus
                 self.recovery_left = torch.where(bonus, torch.full_like(self.recovery_left, fs.recovery_steps + 1), self.recovery_left)
             self.recovery_left = (self.recovery_left - 1).clamp_min(0)
-        terminated = failed | unstable
+        terminated, _ = self.termination({"tracking": failed, "unstable": unstable})
         t_next = self.start_time + (self.progress + 1).to(torch.float64) * self.dt
-        clip_over = ~self._loops[self.clip_ids] & (t_next > self._durations[self.clip_ids] + 1e-6)
+        clip_over = self.starts.clip_over(self.clip_ids, t_next)
         truncated = ((self.progress >= p.episode_steps) | clip_over) & ~terminated
         done = terminated | truncated
         length = self.progress.clone()

@@ -10,12 +10,20 @@ trains a policy with PPO on a :class:`TaskEnv`:
   ``z = latent.to_latent(obs, a)``, ``out = latent.decoder(obs, z)``, and ``out`` becomes PD targets
   (identity for a decoder distilled with ``label: pd_targets`` and for ``scratch``; otherwise the
   imitator's ``to_pd_targets``, which must not need a reference motion);
-* **reward / termination** from the task (``task.reward``, ``task.terminated``) plus numerical
-  instability; **truncation** after ``task.episode_steps`` (default 300 = 10 s);
+* **reward / termination** on the shared episode layer (:mod:`mocap.episodes`): the reward is the
+  one term ``task`` (``task.reward``) of :class:`~mocap.episodes.RewardTerms`, so it is **0 on a
+  numerically unstable step** (or where the task's reward is not finite; before the episode layer
+  the task's reward was passed on as it was); termination is the
+  :class:`~mocap.episodes.TerminationTerms` ``task`` (``task.terminated``) OR ``unstable``;
+  **truncation** after ``task.episode_steps`` (default 300 = 10 s);
 * **starts**: reference states of the motion library (clip and time drawn with its weights) in
   which every non-foot body is above 0.25 m (standing or moving, not lying), then ``task.reset``;
-* **logged**: episode return, length and **normalized return** = return / (``task.max_reward`` ×
-  ``episode_steps``) (PULSE Fig. 4), and the task's own metrics every iteration (``task.metrics()``).
+* **logged**: per step ``reward/task`` (the task's reward before the instability rule),
+  ``terminated/task`` and ``terminated/unstable``; per finished episode (the layer's
+  :class:`~mocap.episodes.EpisodeBook`) return, length, success and **normalized return** = return /
+  (``task.max_reward`` × ``episode_steps``) (PULSE Fig. 4); the task's own metrics every iteration
+  (``task.metrics()``). Returns are summed in float64 (float32 before the episode layer: the logged
+  return statistics may differ from earlier runs in the last bits).
 
 Tasks never see which latent space drives the humanoid; latent spaces never see the task. What
 the env reads from a task beyond the four abstract methods is declared, with defaults, on
@@ -46,6 +54,7 @@ from typing import Any, Callable
 import torch
 from torch import Tensor
 
+from mocap.episodes import EpisodeBook, ReferenceStarts, RewardTerms, TerminationTerms
 from mocap.hierarchy import ScratchParams
 from mocap.interfaces import Box, LatentSample, LatentSpace, MultiDiscrete, Simulator, Task
 from mocap.motion.library import MotionLibrary, grid_start_times
@@ -123,8 +132,9 @@ class TaskEnv:
         self.proprio_dim = 15 * self.skeleton.num_bodies - 2
         self.obs_dim = self.proprio_dim + int(task.goal_dim)
         self._gen = torch.Generator().manual_seed(int(seed))
-        self.steps = torch.zeros(self.num_envs, dtype=torch.long)
-        self.ep_return = torch.zeros(self.num_envs)
+        self.book = EpisodeBook(self.num_envs)  # per-env steps and return of the current episode
+        self.reward_terms = RewardTerms({"task": 1.0})
+        self.termination_terms = TerminationTerms(("task", "unstable"))
         self._obs: Tensor | None = None
         latent.eval()
         # the decoder's raw output (PULSE: decode_action; its `decoder` maps through an attached imitator)
@@ -144,8 +154,10 @@ class TaskEnv:
         # a task that follows the clip it started from reads the reference every step: start it on
         # the control grid and read the reference from the precomputed table (MotionLibrary.use_control_grid)
         self._tracks_reference = bool(task.tracks_reference)
+        self._starts: ReferenceStarts | None = None
         if self._tracks_reference:
             library.use_control_grid(float(sim.dt), self.episode_steps + 2)
+            self._starts = ReferenceStarts(library, float(sim.dt), control_grid=True)
 
     # ------------------------------------------------------------------------------- helpers
     def _proprio(self, state: SimState) -> Observations:
@@ -158,18 +170,16 @@ class TaskEnv:
         from mocap.generation_eval import start_states
 
         clip_ids, times = start_states(self.library, len(ids), self.skeleton, self.start_min_height, self._gen)
-        if self._tracks_reference:
-            lib = self.library
-            dur = lib.durations.to(times.device, torch.float64)[clip_ids]
-            times = grid_start_times(times.to(torch.float64), dur, lib.loops[clip_ids], float(self.sim.dt))
+        if self._starts is not None:  # the task's own start frames (standing), moved onto the control grid
+            st = self._starts
+            times = grid_start_times(times.to(torch.float64), st.durations[clip_ids], st.loops[clip_ids], st.dt)
         sampled = self.library.frames(clip_ids, times)
         frames: HumanoidState = self.task.start_state(ids, sampled)  # terrain spawn square, keyframe-sequence start
         if isinstance(frames, MotionFrames):
             clip_ids, times = frames.clip_ids, frames.times
         self.sim.reset(ids, frames)
         self.latent.reset_envs(ids)  # latents with per-env state (VMP: the tracker's action history)
-        self.steps[ids] = 0
-        self.ep_return[ids] = 0.0
+        self.book.start(ids)
         if self._tracks_reference:  # tasks that track the reference they were started from
             self.task.reference_start(ids, clip_ids, times)
         self.task.reset(ids, self.sim.state)
@@ -195,35 +205,30 @@ class TaskEnv:
         state = self.sim.state
         targets = self.pd_targets(state, actions)
         state = self.sim.step(targets)
-        reward = self.task.reward(state, actions).float().cpu()
+        task_reward = self.task.reward(state, actions).float().cpu()
         self.task.step(state)
-        self.steps += 1
-        self.ep_return += reward
-        unstable = state.unstable.cpu() if state.unstable.numel() else torch.zeros(self.num_envs, dtype=torch.bool)
-        terminated = self.task.terminated(state).cpu().bool() | unstable
-        truncated = self.steps >= self.episode_steps
+        self.book.tick()
+        unstable = state.unstable.cpu().bool() if state.unstable.numel() else torch.zeros(self.num_envs, dtype=torch.bool)
+        reward, info = self.reward_terms({"task": task_reward}, unstable)  # 0 where unstable
+        terminated, term_info = self.termination_terms({"task": self.task.terminated(state).cpu(), "unstable": unstable})
+        info.update(term_info)
+        truncated = self.book.steps >= self.episode_steps
         task_truncated = self.task.truncated(state)
         if task_truncated is not None:  # e.g. the tracked clip ran out
             truncated = truncated | task_truncated.cpu().bool()
-        truncated = truncated & ~terminated
-        final_obs = self._observe(state)
-        done = terminated | truncated
-        episodes: dict[str, Tensor] = {}
-        if bool(done.any()):
-            ids = done.nonzero().squeeze(-1)
-            episodes = {
-                "return": self.ep_return[ids].clone(),
-                "length": self.steps[ids].float(),
-                "normalized_return": self.ep_return[ids] / (self.max_reward * self.episode_steps),
-                "success": (~terminated[ids]).float(),
-            }
-            self._reset_envs(ids)
-            obs = self._observe(self.sim.state)
-        else:
-            obs = final_obs
-        self._obs = obs
-        info = {"reward": float(reward.mean()), "unstable": float(unstable.float().mean())}
-        return StepResult(obs.clone(), reward, terminated, truncated, final_obs, info, episodes)
+        res = self.book.conclude(
+            reward, terminated, truncated, self._observe_envs, self._reset_envs, info=info, on_finish=self._normalized_return, count_step=False
+        )
+        self._obs = res.obs
+        return res
+
+    def _observe_envs(self, ids: Tensor | None) -> Tensor:
+        """The observation of every env (``ids`` None) or of envs ``ids`` (after their reset)."""
+        obs = self._observe(self.sim.state)
+        return obs if ids is None else obs[ids]
+
+    def _normalized_return(self, ids: Tensor, terminated: Tensor) -> dict[str, Tensor]:
+        return {"normalized_return": (self.book.returns[ids] / (self.max_reward * self.episode_steps)).float()}
 
     def after_iteration(self, iteration: int, policy_fn: Any) -> dict[str, float]:
         """The task's metrics accumulated over the iteration (logged under ``eval/``)."""
@@ -234,8 +239,8 @@ class TaskEnv:
             "format": STATE_FORMAT,
             "num_envs": self.num_envs,
             "generator": self._gen.get_state().clone(),
-            "steps": self.steps.clone(),
-            "ep_return": self.ep_return.clone(),
+            "steps": self.book.steps.clone(),
+            "ep_return": self.book.returns.clone(),  # float64 (float32 before the episode layer: both load)
             "prior_generator": self._prior_gen.get_state().clone(),
         }
         sd.update(save_sim_state(self.sim))
@@ -249,8 +254,7 @@ class TaskEnv:
         if int(state["num_envs"]) != self.num_envs:
             raise ValueError(f"state has {state['num_envs']} envs, this env {self.num_envs}")
         self._gen.set_state(state["generator"].clone())
-        self.steps = state["steps"].clone()
-        self.ep_return = state["ep_return"].clone()
+        self.book.load_state_dict({"steps": state["steps"], "returns": state["ep_return"]})
         if "prior_generator" in state:
             self._prior_gen.set_state(state["prior_generator"].clone())
         load_sim_state(self.sim, torch.arange(self.num_envs), state)
@@ -288,7 +292,7 @@ def make_task_env(ctx: Any, num_envs: int) -> TaskEnv:
     library = MotionLibrary(motion_set, skeleton)
     component = ctx.plugins.get("task", task_ref.name)
     extra: dict[str, Any] = {"motions": library} if _accepts(component.resolved_factory(), "motions") else {}
-    task = component.build(ctx.params("task"), skeleton=skeleton, num_envs=num_envs, device="cpu", **extra)
+    task = component.build(ctx.params("task"), skeleton=skeleton, num_envs=num_envs, device=torch.device("cpu"), **extra)
     latent_stage = ctx.upstream.get("latent")
     latent_ckpt = latent_stage.checkpoint if latent_stage is not None else None
     if latent_ckpt is None and spec.latent.trainer is not None:
@@ -317,9 +321,7 @@ def make_task_env(ctx: Any, num_envs: int) -> TaskEnv:
         sim.close()
         raise StageFailed(f"task {task_ref.name} with latent {spec.latent.name}: {exc}") from None
     space = env.action_space
-    probe = (
-        torch.zeros(num_envs, len(space.nvec), dtype=torch.long) if isinstance(space, MultiDiscrete) else torch.zeros(num_envs, *space.shape)
-    )
+    probe = torch.zeros(num_envs, len(space.nvec), dtype=torch.long) if isinstance(space, MultiDiscrete) else torch.zeros(num_envs, *space.shape)
     try:  # a decoder that needs the reference motion fails here, before training starts
         env.pd_targets(sim.state, probe)
     except ValueError as exc:

@@ -20,7 +20,6 @@ from rich.console import Console
 torch.set_num_threads(1)
 
 
-
 import mocap.distill  # noqa: E402
 import mocap_pulse.plugin  # noqa: E402
 from mocap.baselines import PDReplay  # noqa: E402
@@ -155,9 +154,7 @@ def test_mixture_beta_and_params():
 
 # ---------------------------------------------------------------------------------- training
 def test_distillation_lowers_the_action_loss(amp, walk, teacher_file, tmp_path):
-    params = DistillParams(
-        num_envs=6, horizon=16, total_env_steps=6 * 16 * 12, epochs=8, minibatch_envs=3, lr=2e-3, eval_every=6, eval_horizon=0.5
-    )
+    params = DistillParams(num_envs=6, horizon=16, total_env_steps=6 * 16 * 12, epochs=8, minibatch_envs=3, lr=2e-3, eval_every=6, eval_horizon=0.5)
     ctx = FakeContext(tmp_path, amp, walk, teacher_file)
     result = run(ctx, params)
     recs = records(tmp_path)
@@ -276,9 +273,7 @@ latent:
         latent_record = records_[-1]
         assert latent_record.stage == "latent" and latent_record.result.checkpoint == latent_record.workdir / "latent.pt"
         assert (latent_record.workdir / "DONE.json").is_file() and "eval/success_rate" in latent_record.result.metrics
-        latent = pset.get("latent", "pulse").build(
-            resolved.params["latent"], skeleton=amp, checkpoint=latent_record.result.checkpoint, device="cpu"
-        )
+        latent = pset.get("latent", "pulse").build(resolved.params["latent"], skeleton=amp, checkpoint=latent_record.result.checkpoint, device="cpu")
     assert isinstance(latent, PulseLatent) and latent.latent_dim == 4
     steps = [json.loads(line)["step"] for line in (tmp_path / "run" / "metrics.jsonl").read_text().splitlines()]
     assert steps == [1, 2]
@@ -313,10 +308,7 @@ def test_distill_without_an_imitator_is_a_clear_error(tmp_path):
     from mocap.testing import invoke
 
     spec = tmp_path / "s.yaml"
-    spec.write_text(
-        "spec_version: 1\nname: no-teacher\nmotions: {name: deepmimic, params: {clips: [walk]}}\n"
-        "latent: {name: pulse, trainer: {name: distill}}\n"
-    )
+    spec.write_text("spec_version: 1\nname: no-teacher\nmotions: {name: deepmimic, params: {clips: [walk]}}\nlatent: {name: pulse, trainer: {name: distill}}\n")
     result = invoke(["run", spec, "--out", tmp_path / "runs" / "x"])
     assert result.exit_code == 2 and "Traceback" not in result.output
     assert "needs a teacher" in result.stderr
@@ -358,3 +350,35 @@ def test_fallen_starts_and_bonus_recovery_episodes_in_distillation(amp, walk):
     far = ep3.reference_next()
     far.body_pos += 5.0
     assert bool(ep3.after_step(ep3.sim.step(ep3.sim.state.dof_pos.clone()), far)["terminated"].all())
+
+
+def test_distillation_episodes_are_built_on_the_episode_layer(amp):
+    """Starts come from mocap.episodes.ReferenceStarts (same draws for the same generator), a
+    non-looping clip's end truncates, and termination is the terms ``tracking`` OR ``unstable``: an
+    unstable env terminates even where it tracks the reference."""
+    from dataclasses import replace
+
+    from mocap.distill_episodes import DistillEpisodes
+    from mocap.episodes import ReferenceStarts, TerminationTerms
+
+    lib = MotionLibrary(DeepMimicSource(DeepMimicParams(clips=["walk", "punch"])).load(amp), amp)
+    ep = DistillEpisodes(DistillParams(num_envs=6, minibatch_envs=6, episode_steps=1000), lib, make_sim(amp, 6), seed=0)
+    assert isinstance(ep.starts, ReferenceStarts) and isinstance(ep.termination, TerminationTerms)
+    assert ep.termination.enabled == {"tracking": True, "unstable": True}
+    ep.reset_all()
+    clips, t0 = ReferenceStarts(lib, ep.dt, control_grid=True).sample(6, torch.Generator().manual_seed(0))
+    assert torch.equal(ep.clip_ids, clips) and torch.equal(ep.start_time, t0)
+    ref = ep.reference_next()
+    state = ep.sim.step(ref.dof_pos.float())
+    state = replace(state, body_pos=ref.body_pos.to(state.body_pos), unstable=torch.tensor([True] + [False] * 5))
+    out = ep.after_step(state, ref)
+    assert out["terminated"].tolist() == [True] + [False] * 5 and not bool(out["truncated"][0])
+    # a non-looping clip: the step that reaches past its end truncates (the looping walk goes on)
+    punch = lib.clip_names.index("punch")
+    ep.clip_ids[:] = punch
+    ep.start_time[:] = float(lib.durations[punch]) - 1.5 * ep.dt
+    ep.progress[:] = 0
+    ref = ep.reference_next()
+    state = replace(ep.sim.step(ref.dof_pos.float()), body_pos=ref.body_pos.float())
+    out = ep.after_step(state, ref)
+    assert bool(out["truncated"].all()) and not bool(out["terminated"].any()) and out["length"].tolist() == [1] * 6

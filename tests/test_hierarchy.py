@@ -60,10 +60,14 @@ class Upright(Task):
 
 
 upright_plugin = types.SimpleNamespace(
-    register_tasks=hookimpl(lambda register: register(
-        "upright", lambda params, *, skeleton, num_envs, device="cpu": Upright(params, num_envs), params=UprightParams,
-        description="test task",
-    ))
+    register_tasks=hookimpl(
+        lambda register: register(
+            "upright",
+            lambda params, *, skeleton, num_envs, device="cpu": Upright(params, num_envs),
+            params=UprightParams,
+            description="test task",
+        )
+    )
 )
 
 
@@ -134,8 +138,10 @@ def test_task_env_resumes_on_a_simulator_without_a_physics_state(amp, walk):  # 
             return None
 
     latent = ScratchLatent(ScratchParams(), amp)
-    envs = [TaskEnv(Upright(UprightParams(), 3), latent, lambda obs, out: out, MotionLibrary(walk, amp), Kinematic(skeleton=amp, num_envs=3, seed=0), seed=1)
-            for _ in range(2)]
+    envs = [
+        TaskEnv(Upright(UprightParams(), 3), latent, lambda obs, out: out, MotionLibrary(walk, amp), Kinematic(skeleton=amp, num_envs=3, seed=0), seed=1)
+        for _ in range(2)
+    ]
     a, b = envs
     a.reset()
     for _ in range(5):
@@ -230,4 +236,68 @@ def test_task_env_with_goals_resumes_exactly(amp, walk):  # noqa: F811
     for act in acts[8:]:  # goals change every 3-4 steps: new ones come from the restored generator
         ra, rb = a.step(act), b.step(act)
         assert torch.equal(ra.obs, rb.obs) and torch.equal(ra.reward, rb.reward)
+    a.close(), b.close()
+
+
+def test_task_env_zeroes_the_reward_of_an_unstable_step_and_logs_the_terms(amp, walk):  # noqa: F811
+    """The episode layer (mocap.episodes): the task's reward is the term ``task`` (logged unweighted
+    as ``reward/task``), 0 on a numerically unstable step, and termination is ``task`` OR ``unstable``
+    (logged as ``terminated/<name>``); the episode's return leaves the unstable step's reward out."""
+    from dataclasses import replace
+
+    from mocap_sim_mujoco.simulator import MujocoSimulator
+
+    class Shaky(MujocoSimulator):
+        calls = 0
+
+        def step(self, targets):  # type: ignore[no-untyped-def]
+            s = super().step(targets)
+            self.calls += 1
+            if self.calls == 4:  # env 1 blows up on the 4th step
+                s = replace(s, unstable=torch.tensor([False, True, False]))
+            return s
+
+    sim = Shaky(skeleton=amp, num_envs=3, seed=0)
+    env = TaskEnv(Upright(UprightParams(), 3), ScratchLatent(ScratchParams(), amp), lambda obs, out: out, MotionLibrary(walk, amp), sim, seed=1)
+    env.reset()
+    rewards = []
+    for k in range(4):
+        out = env.step(torch.zeros(3, amp.num_dofs))
+        assert set(out.info) == {"reward/task", "terminated/task", "terminated/unstable"}
+        assert torch.equal(out.terminated, out.info["terminated/task"].bool() | out.info["terminated/unstable"].bool())
+        rewards.append(out.reward.clone())
+        if k < 3:
+            assert torch.equal(out.info["terminated/unstable"], torch.zeros(3)) and torch.equal(out.reward, out.info["reward/task"])
+    assert torch.equal(out.info["terminated/unstable"], torch.tensor([0.0, 1.0, 0.0]))
+    assert float(out.reward[1]) == 0.0 and float(out.info["reward/task"][1]) > 0  # the term is logged as it was
+    assert torch.equal(out.reward[[0, 2]], out.info["reward/task"][[0, 2]])
+    assert bool(out.terminated[1]) and not bool(out.truncated[1])
+    done = (out.terminated | out.truncated).nonzero().squeeze(-1).tolist()
+    i = done.index(1)
+    assert float(out.episodes["success"][i]) == 0.0 and float(out.episodes["length"][i]) == 4.0
+    expected = sum(float(r[1]) for r in rewards[:3])
+    assert float(out.episodes["return"][i]) == pytest.approx(expected, rel=1e-6)
+    assert int(env.book.steps[1]) == 0  # reset
+    env.close()
+
+
+def test_task_env_resumes_from_a_state_dict_with_float32_returns(amp, walk):  # noqa: F811
+    """Returns are float64 now (the episode layer's EpisodeBook); a state dict written before (with
+    ``ep_return`` float32) still loads and continues like the running env."""
+    latent = ScratchLatent(ScratchParams(), amp)
+    a, b = _env(amp, walk, latent), _env(amp, walk, latent)
+    a.reset()
+    g = torch.Generator().manual_seed(0)
+    acts = [torch.rand(3, amp.num_dofs, generator=g) * 2 - 1 for _ in range(25)]
+    for act in acts[:6]:
+        a.step(act)
+    sd = a.state_dict()
+    assert set(sd) >= {"steps", "ep_return"} and sd["ep_return"].dtype == torch.float64
+    b.load_state_dict({**sd, "ep_return": sd["ep_return"].float()})  # the old format
+    assert b.book.returns.dtype == torch.float64 and torch.equal(b.book.steps, a.book.steps)
+    for act in acts[6:]:
+        ra, rb = a.step(act), b.step(act)
+        assert torch.equal(ra.obs, rb.obs) and torch.equal(ra.reward, rb.reward) and torch.equal(ra.terminated, rb.terminated)
+        assert set(ra.episodes) == set(rb.episodes) and torch.equal(ra.episodes.get("length", torch.zeros(0)), rb.episodes.get("length", torch.zeros(0)))
+        torch.testing.assert_close(ra.episodes.get("return", torch.zeros(0)), rb.episodes.get("return", torch.zeros(0)))
     a.close(), b.close()
