@@ -1,16 +1,20 @@
-"""What every resumable trainer does around its loop, written once (PPO, distill, VMP's supervised).
+"""What every resumable trainer does around its loop, written once (PPO, distill, VMP's supervised,
+and the composite trainers that run those as sub-phases: PMCP and ``vmp_track``).
 
 * :func:`begin` — the stage's torch threads, its working directory, and the process RNGs (torch,
   numpy, ``random``) seeded from ``ctx.seed``; returns the checkpoint path and the device;
 * :func:`resume_from` — the trainer's own checkpoint when there is one (format checked: another
   file in its place is a :class:`~mocap.errors.CheckpointError` naming it), else None after
   dropping ``metrics.jsonl`` rows of a run that crashed before its first checkpoint;
+* :func:`resume_state_file` — a composite trainer's JSON record of its phases (PMCP), format
+  checked the same way;
 * :func:`resumed` — after the trainer restored its own state: the process RNG state, the log
   truncated to the checkpoint's step (rows logged after it would be doubled), one console line.
 """
 
 from __future__ import annotations
 
+import json
 import random
 from pathlib import Path
 from typing import Any
@@ -47,6 +51,21 @@ def resume_from(ctx: Any, path: Path, fmt: str, what: str, map_location: Any = N
     return ck
 
 
+def resume_state_file(path: Path, fmt: Any, what: str) -> dict[str, Any] | None:
+    """The JSON state file at ``path`` (its ``format`` must be ``fmt``), or None when there is none.
+    A file that is not JSON or not this trainer's is a :class:`~mocap.errors.CheckpointError` naming it."""
+    if not path.is_file():
+        return None
+    try:
+        state = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise CheckpointError(f"{path}: not a {what} state file ({exc}); remove it to start the stage over") from None
+    if not isinstance(state, dict) or state.get("format") != fmt:
+        found = state.get("format") if isinstance(state, dict) else type(state).__name__
+        raise CheckpointError(f"{path}: not a {what} state file (format {found!r}); remove it to start the stage over")
+    return state
+
+
 def resumed(ctx: Any, what: str, step: int, rng: Any = None, detail: str = "") -> None:
     """Finish a resume at ``step``: restore the process RNGs (``rng``, when the checkpoint holds this
     process's), drop the log rows after ``step``, say so."""
@@ -56,4 +75,4 @@ def resumed(ctx: Any, what: str, step: int, rng: Any = None, detail: str = "") -
     ctx.console.print(f"{what}: resuming at {detail or f'step {step}'}")
 
 
-__all__ = ["begin", "resume_from", "resumed"]
+__all__ = ["begin", "resume_from", "resume_state_file", "resumed"]

@@ -60,3 +60,44 @@ def test_init_lr_keeps_the_first_update_of_a_continued_policy_small(tmp_path: Pa
     assert p.start_lr(fresh=True) == 1e-5 and p.start_lr(fresh=False) == p.lr
     assert small_params(init_policy=trained.checkpoint, lr_schedule="constant", init_lr=1e-5).start_lr(True) == 3e-3
     assert small_params(lr_schedule="adaptive").start_lr(True) == 3e-3  # no init_policy: a fresh network
+
+
+def test_init_model_seeds_a_fresh_phase_and_a_resume_keeps_its_own_weights(tmp_path: Path):
+    """``PPOTrainer(params, init_model=...)`` (how PMCP starts a phase from another policy): the hook
+    runs on the fresh model before training; a resumed stage loads ``ppo.pt`` and does not call it."""
+    from test_ppo import FakeContext, PointEnv
+
+    trained = _train(tmp_path / "a", small_params())
+    src = load_policy(trained.checkpoint)
+    calls: list[int] = []
+
+    def init(model) -> None:
+        calls.append(1)
+        model.load_state_dict(src.state_dict())
+
+    def run(stop_after: int | None) -> None:
+        ctx = FakeContext(tmp_path / "b", lambda n: PointEnv(n, seed=0), seed=0, stop_after=stop_after)
+        PPOTrainer(small_params(total_env_steps=4 * 32 * 32), init_model=init).run(ctx)
+        ctx.log.close()
+
+    run(stop_after=1)
+    first = json.loads((tmp_path / "b" / "metrics.jsonl").read_text().splitlines()[0])
+    assert first["episode/return"] > episode_returns(tmp_path / "a")[0] + 5  # started from the trained weights
+    assert calls == [1]
+    run(stop_after=None)  # resumes from ppo.pt
+    assert calls == [1]
+
+
+def test_a_pmcp_state_file_that_is_not_one_is_a_clear_error(tmp_path: Path):
+    from mocap import trainer_scaffold as scaffold
+
+    path = tmp_path / "pmcp_state.json"
+    assert scaffold.resume_state_file(path, 1, "PMCP") is None
+    path.write_text("{not json")
+    with pytest.raises(CheckpointError, match="pmcp_state.json: not a PMCP state file"):
+        scaffold.resume_state_file(path, 1, "PMCP")
+    path.write_text('{"format": 7}')
+    with pytest.raises(CheckpointError, match="format 7"):
+        scaffold.resume_state_file(path, 1, "PMCP")
+    path.write_text('{"format": 1, "phase": "composer"}')
+    assert scaffold.resume_state_file(path, 1, "PMCP") == {"format": 1, "phase": "composer"}

@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 import time
 from collections import deque
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 import torch
@@ -139,11 +139,16 @@ class PPOTrainer(Trainer):
 
     data_parallel = True  # runs on every rank under torchrun (module docstring)
 
-    def __init__(self, params: PPOParams | None = None):
+    def __init__(self, params: PPOParams | None = None, init_model: Callable[[ActorCritic], None] | None = None):
+        """``init_model``: called on the freshly built model of a fresh run (not on a resume, where
+        ``ppo.pt`` overwrites it), e.g. a trainer running PPO as a sub-phase that starts it from
+        another policy's weights (PMCP's copied primitives, its composer's bias)."""
         self.params = params or PPOParams()
+        self.init_model = init_model
 
     # ----------------------------------------------------------------------------- building
     def build_model(self, obs_dim: int, action_space: Any) -> ActorCritic:
+        """The actor-critic of the params (no weights loaded; :meth:`run` applies ``init_model``)."""
         p = self.params
         return ActorCritic(
             obs_dim,
@@ -169,6 +174,8 @@ class PPOTrainer(Trainer):
         space = env.action_space
         model = self.build_model(env.obs_dim, space).to(device)
         fresh = not ckpt_path.is_file()
+        if fresh and self.init_model is not None:
+            self.init_model(model)
         if fresh and p.init_policy is not None:
             init_from_policy(model, p.init_policy, p.init_log_std)
             ctx.console.print(f"ppo: starting from {p.init_policy}")
@@ -358,9 +365,7 @@ class PPOTrainer(Trainer):
                         log[f"eval/{key}"] = float(val)
                         last_eval[f"eval/{key}"] = float(val)
                 if parallel:  # one line for all ranks: sums, slowest times, means, pooled episode windows
-                    log = dist.reduce_metrics(
-                        log, sums=("episodes_finished",), maxima=("time/rollout_s", "time/update_s"), windows=window
-                    )
+                    log = dist.reduce_metrics(log, sums=("episodes_finished",), maxima=("time/rollout_s", "time/update_s"), windows=window)
                     log["steps_per_s"] = T * N * world / max(log["time/rollout_s"] + log["time/update_s"], 1e-9)
                     log["rollout_steps_per_s"] = T * N * world / max(log["time/rollout_s"], 1e-9)
                 ctx.log.log(iteration, **log)

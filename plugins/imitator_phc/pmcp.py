@@ -73,7 +73,6 @@ plumbing in :mod:`mocap_phc.pmcp_phases`.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -84,6 +83,8 @@ from mocap.checkpoint import atomic_write_json, atomic_write_text, load_checkpoi
 from mocap.interfaces import Box, StageResult, Trainer
 from mocap.rl.networks import ActorCritic, load_policy, save_policy
 from mocap.rl.ppo import PPOTrainer
+from mocap import trainer_scaffold as scaffold
+from mocap.errors import CheckpointError
 from mocap_phc.pmcp_composite import (
     PMCP_FORMAT,
     CompositeImitator,
@@ -95,7 +96,7 @@ from mocap_phc.pmcp_composite import (
     make_composite_imitator,
 )
 from mocap_phc.pmcp_params import GetupPhaseParams, PMCPParams, RecoveryPhaseParams
-from mocap_phc.pmcp_phases import ComposerEnv, PrimitiveEnv, _SeededPPO
+from mocap_phc.pmcp_phases import ComposerEnv, PrimitiveEnv
 from mocap_phc.pmcp_rules import PlateauTracker, next_hard_set, pmcp_report, unique_clip_names
 from mocap_phc.recovery import FailStateParams
 
@@ -115,8 +116,8 @@ class PMCPTrainer(Trainer):
     # ----------------------------------------------------------------------------- helpers
     def _setup(self, ctx: Any) -> None:
         self.ctx = ctx
-        self.workdir = Path(ctx.workdir)
-        self.workdir.mkdir(parents=True, exist_ok=True)
+        state_path, _ = scaffold.begin(ctx, self.params.ppo.torch_threads, STATE_FILE)  # threads, workdir, seeds
+        self.workdir = state_path.parent
         self.component = ctx.stage_component()
         from mocap_phc.imitator import PHCImitator
 
@@ -187,12 +188,10 @@ class PMCPTrainer(Trainer):
 
     def _load_state(self) -> dict[str, Any]:
         path = self.workdir / STATE_FILE
-        if path.is_file():
-            state = json.loads(path.read_text(encoding="utf-8"))
-            if state.get("format") != STATE_FORMAT:
-                raise ValueError(f"{path}: not a PMCP state file (format {state.get('format')!r})")
-            if state["clip_names"] != self.clip_names:
-                raise ValueError(f"{path}: made with a different motion set")
+        state = scaffold.resume_state_file(path, STATE_FORMAT, "PMCP")
+        if state is not None:
+            if state.get("clip_names") != self.clip_names:
+                raise CheckpointError(f"{path}: made with a different motion set; remove the stage's directory to start over")
             return state
         state = {
             "format": STATE_FORMAT,
@@ -375,7 +374,7 @@ class PMCPTrainer(Trainer):
         what = "get-up phase of P(F)" if getup else ("recovery primitive P(F)" if recovery else "primitive")
         ctx.console.print(f"pmcp: {what} {k} on {len(ids)} clip(s): {', '.join(names[:8])}{' ...' if len(names) > 8 else ''}")
         try:
-            result = _SeededPPO(ppo_params, init).run(sub)
+            result = PPOTrainer(ppo_params, init_model=init).run(sub)
         finally:
             sub.log.close()
         env = holder.get("env")
@@ -472,7 +471,7 @@ class PMCPTrainer(Trainer):
         sub = ctx.phase("composer", workdir=phase_dir, seed=seed, env_factory=make_env)
         ctx.console.print(f"pmcp: composer ({p.composer_form}) over {K} primitive(s) on all {len(ids)} clips")
         try:
-            result = _SeededPPO(p.composer_ppo, init).run(sub)
+            result = PPOTrainer(p.composer_ppo, init_model=init).run(sub)
         finally:
             sub.log.close()
         ck = load_checkpoint(phase_dir / "ppo.pt")

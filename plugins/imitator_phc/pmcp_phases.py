@@ -1,6 +1,7 @@
 """One PMCP phase as a PPO run (:mod:`mocap_phc.pmcp`): the training envs of a primitive
-(:class:`PrimitiveEnv`, with its plateau tracker) and of the composer (:class:`ComposerEnv`), and the
-plumbing that runs :class:`~mocap.rl.ppo.PPOTrainer` in a phase's own directory and log stage."""
+(:class:`PrimitiveEnv`, with its plateau tracker) and of the composer (:class:`ComposerEnv`). The
+phase itself is a plain :class:`~mocap.rl.ppo.PPOTrainer` (``init_model`` seeds its fresh weights) run
+on a child context (:meth:`mocap.pipeline.StageContext.phase`) with the phase's own directory and log stage."""
 
 from __future__ import annotations
 
@@ -12,7 +13,6 @@ from torch import Tensor
 from mocap.interfaces import Box
 from mocap.rl.env import StepResult
 from mocap.rl.networks import ActorCritic
-from mocap.rl.ppo import PPOParams, PPOTrainer
 from mocap_phc.pmcp_composite import compose
 from mocap_phc.pmcp_params import ComposerForm
 from mocap_phc.pmcp_rules import PlateauTracker
@@ -124,19 +124,3 @@ class ComposerEnv:
 
     def close(self) -> None:
         self.inner.close()
-
-
-# -------------------------------------------------------------------------- PPO of a phase
-class _SeededPPO(PPOTrainer):
-    """PPO whose freshly built model is first passed to ``init_model`` (copied weights, composer bias).
-    A resumed run overwrites it from ``ppo.pt`` as usual."""
-
-    def __init__(self, params: PPOParams, init_model: Callable[[ActorCritic], None] | None = None):
-        super().__init__(params)
-        self.init_model = init_model
-
-    def build_model(self, obs_dim: int, action_space: Any) -> ActorCritic:
-        model = super().build_model(obs_dim, action_space)
-        if self.init_model is not None:
-            self.init_model(model)
-        return model

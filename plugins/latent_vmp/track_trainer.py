@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 
+from mocap import trainer_scaffold as scaffold
 from mocap.checkpoint import load_checkpoint, save_checkpoint
 from mocap.interfaces import StageResult, Trainer
 from mocap.rl.ppo import PPOTrainer
@@ -48,9 +49,8 @@ class VmpTrackTrainer(Trainer):
         from mocap_vmp.latent import VmpLatent
 
         p = self.params
-        workdir = Path(ctx.workdir)
-        workdir.mkdir(parents=True, exist_ok=True)
-        combined = workdir / COMBINED_NAME
+        combined, _ = scaffold.begin(ctx, None, COMBINED_NAME)  # workdir and seeds; each part sets its threads
+        workdir = combined.parent
         if combined.is_file():
             data = load_checkpoint(combined)
             if data.get("format") == FORMAT and data.get(TRACKER_KEY) is not None:
