@@ -50,6 +50,7 @@ def load_arm(name: str, result: Path, workdir: Path | None) -> dict[str, Any]:
         "name": name,
         "overrides": data.get("overrides", []),
         "minutes": data.get("minutes"),
+        "env_steps_budget": data.get("env_steps_budget"),
         "load_avg_before": data.get("load_avg_before"),
         "load_avg_at_end_of_training": data.get("load_avg_at_end_of_training"),
         "points": data["points"],
@@ -78,19 +79,27 @@ def _f(v: Any, fmt: str = ".1f") -> str:
 
 
 def render(result: dict[str, Any]) -> str:
+    by_steps = all(arm.get("env_steps_budget") for arm in result["arms"])
+    budget = (
+        "the same env-step budget (`time_to_skill.py --env-steps`; the minutes include any time the machine was shared or "
+        "the run paused, so compare at equal env steps)"
+        if by_steps
+        else "the same wall-clock budget"
+    )
     lines = [
         f"# Imitator A/B: {result['spec']}",
         "",
-        "Each arm: the spec plus one `--set` lever, trained for the same wall-clock budget from the same start, "
-        "then evaluated with `mocap eval`'s protocol (15 clips, each once from its first frame).",
+        f"Each arm: the spec plus one `--set` lever, trained for {budget} from the same start, "
+        "then evaluated with `mocap eval`'s protocol (15 clips, each once from its first frame). The last columns "
+        "average the arm's last 20 PPO iterations: training episode length and success, learning rate and approx. KL.",
         "",
     ]
     if result.get("start"):
         s = result["start"]
         lines += [f"Start: {s['clips_tracked']}/{s['clips_total']} clips, MPJPE-g {_f(s['mpjpe_g_succ_mm'])} mm on them.", ""]
     lines += [
-        "| arm | lever | min | env steps | clips | MPJPE-g tracked (mm) | MPJPE-g all (mm) | train ep. length | train success | load avg |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| arm | lever | min | env steps | clips | MPJPE-g tracked (mm) | MPJPE-g all (mm) | train ep. length | train success | lr | KL | load avg |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for arm in result["arms"]:
         tail = arm.get("training_last_20_iterations", {})
@@ -100,7 +109,8 @@ def render(result: dict[str, Any]) -> str:
             lines.append(
                 f"| {arm['name']} | `{lever}` | {_f(p['minutes'])} | {p['env_steps'] / 1e6:.2f}M | {p['clips_tracked']}/{p['clips_total']} "
                 f"| {_f(p['mpjpe_g_succ_mm'])} | {_f(p['mpjpe_g_all_mm'])} | {_f(tail.get('episode/length'))} "
-                f"| {_f(tail.get('episode/success'), '.2f')} | {_f(load[0] if load else None, '.2f')} |"
+                f"| {_f(tail.get('episode/success'), '.2f')} | {_f(tail.get('lr'), '.1e')} | {_f(tail.get('approx_kl'), '.3f')} "
+                f"| {_f(load[0] if load else None, '.2f')} |"
             )
     lines += ["", "Clips tracked at the end of each arm:", ""]
     for arm in result["arms"]:

@@ -19,13 +19,14 @@ simulator, for unit tests of tasks, rewards and observation code.
 from __future__ import annotations
 
 import math
-from typing import Any, Callable
+from typing import Any, Callable, Mapping
 
 import torch
 from torch import Tensor
 
 from mocap.interfaces import Box, LatentSample, LatentSpace, MultiDiscrete, Simulator, Task
 from mocap.kinematics import forward_kinematics_dofs
+from mocap.sim_snapshot import load_sim_state, save_sim_state
 from mocap.skeleton import Skeleton
 from mocap.state import HUMANOID_FIELDS, Observations, SimState
 
@@ -94,13 +95,16 @@ def _check_state(state: Any, skeleton: Skeleton, n: int, what: str) -> None:
 
 
 def check_simulator(sim: Simulator, steps: int = 3) -> list[str]:
-    """A :class:`Simulator`: ``dt`` > 0; ``state`` of the declared shapes; ``reset`` of a subset of
+    """A :class:`Simulator`: ``dt`` > 0; ``device`` a :class:`torch.device` where ``state`` lives;
+    ``state`` of the declared shapes; ``reset`` of a subset of
     envs puts them at the given pose; ``step`` with (N, D) PD targets returns finite states and a
     wrongly shaped action is a ValueError; ``get_physics_state`` / ``set_physics_state``
     round-trip when offered."""
     sk, N = sim.skeleton, sim.num_envs
     _require(isinstance(sim.dt, float) and sim.dt > 0, f"Simulator.dt must be a positive float, got {sim.dt!r}")
+    _require(isinstance(sim.device, torch.device), f"Simulator.device must be a torch.device, got {sim.device!r}")
     _check_state(sim.state, sk, N, "Simulator.state")
+    _require(sim.state.root_pos.device.type == sim.device.type, f"Simulator.state lives on {sim.state.root_pos.device}, not Simulator.device {sim.device}")
     start = fake_sim_state(sk, N, seed=1)
     ids = torch.arange(0, N, 2)
     sim.reset(ids, start.index(ids))
@@ -133,12 +137,26 @@ def check_simulator(sim: Simulator, steps: int = 3) -> list[str]:
     return report
 
 
-def check_task(task: Task, skeleton: Skeleton, num_envs: int = 4, steps: int = 3, state_factory: Callable[[int], SimState] | None = None) -> list[str]:
+def check_task(
+    task: Task,
+    skeleton: Skeleton,
+    num_envs: int = 4,
+    steps: int = 3,
+    state_factory: Callable[[int], SimState] | None = None,
+    declared: Mapping[str, Any] | None = None,
+    sim: Simulator | None = None,
+) -> list[str]:
     """A :class:`Task` with ``num_envs`` envs: ``observe`` (N, goal_dim) finite; ``reward`` (N,)
     finite and at most ``max_reward``; ``terminated`` (N,) bool; ``reset`` of a subset; ``metrics``
     a mapping of names to floats; ``state_dict`` / ``load_state_dict`` round-trip (same
     observation after a reload). ``state_factory(seed)`` gives the states (default
-    :func:`fake_sim_state`); tasks that need ``attach`` / ``attach_motions`` get them before."""
+    :func:`fake_sim_state`); tasks that need ``attach`` / ``attach_motions`` get them before.
+    ``declared``: the metric declarations the task was registered with (``register(...,
+    metrics=...)``, :attr:`mocap.plugins.Component.metrics`); every key ``metrics()`` reports must
+    be declared there (an undeclared key reaches reports without a display name or unit).
+    ``sim``: the simulator a task with ``sim_overrides`` was attached to (its goal lives there, e.g.
+    strike's target): the round-trip saves and restores its physics with the task's state, as the
+    task env's ``state_dict`` does."""
     N = num_envs
     make = state_factory or (lambda seed: fake_sim_state(skeleton, N, seed=seed))
     _require(isinstance(task.goal_dim, int) and task.goal_dim >= 0, f"Task.goal_dim must be an int >= 0, got {task.goal_dim!r}")
@@ -162,12 +180,18 @@ def check_task(task: Task, skeleton: Skeleton, num_envs: int = 4, steps: int = 3
     metrics = task.metrics()
     _require(isinstance(metrics, dict) and all(isinstance(k, str) and isinstance(v, (int, float)) for k, v in metrics.items()),
              "Task.metrics must return {name: float}")  # fmt: skip
+    if declared is not None:
+        undeclared = sorted(set(metrics) - set(declared))
+        _require(not undeclared, f"Task.metrics reports undeclared key(s) {', '.join(undeclared)}: declare them in register(..., metrics=...)")
     saved = task.state_dict()
+    physics = save_sim_state(sim) if sim is not None else None
     before = task.observe(state).clone()
     task.reset(torch.arange(N), make(99))
+    if sim is not None and physics is not None:
+        load_sim_state(sim, torch.arange(N), physics)
     task.load_state_dict(saved)
     _require(bool(torch.allclose(task.observe(state), before)), "Task.load_state_dict(state_dict()) does not restore the goals")
-    return [f"{steps} steps of {N} envs", "subset reset", "metrics", "state_dict round-trip"]
+    return [f"{steps} steps of {N} envs", "subset reset", "metrics" if declared is None else "declared metrics", "state_dict round-trip"]
 
 
 def _check_sample(s: Any, n: int, z: int, what: str) -> None:

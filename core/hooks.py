@@ -48,7 +48,10 @@ class Register(Protocol):
 
 @hookspec
 def register_simulators(register: Register) -> None:
-    """Register simulators: ``factory(params, *, skeleton, num_envs, seed, device) -> Simulator``."""
+    """Register simulators: ``factory(params, *, skeleton, num_envs, seed, **_) -> Simulator``.
+
+    The framework passes no device: a simulator keeps its state where its engine runs (the MuJoCo
+    simulator on the CPU; ``mujoco_warp`` on its GPU) and says so with ``Simulator.device``."""
 
 
 @hookspec
@@ -65,18 +68,25 @@ def register_motion_sources(register: Register) -> None:
 def register_imitators(register: Register) -> None:
     """Register imitators: ``factory(params, *, skeleton, checkpoint, device) -> Imitator``.
 
-    ``checkpoint`` is the imitator stage's trained checkpoint (None for untrained baselines).
+    ``checkpoint`` is the imitator stage's trained checkpoint (None for untrained baselines);
+    ``device`` is always a :class:`torch.device` (the stage's, ``mocap run --device``).
     """
 
 
 @hookspec
 def register_latent_spaces(register: Register) -> None:
-    """Register latent spaces: ``factory(params, *, skeleton, checkpoint, device) -> LatentSpace``."""
+    """Register latent spaces: ``factory(params, *, skeleton, checkpoint, device) -> LatentSpace``.
+
+    ``checkpoint`` is the latent stage's ``latent.pt`` (None when it is about to be trained): the
+    factory must load it; ``device`` is always a :class:`torch.device`."""
 
 
 @hookspec
 def register_tasks(register: Register) -> None:
     """Register downstream tasks: ``factory(params, *, skeleton, num_envs, device) -> Task``.
+
+    ``device`` is always a :class:`torch.device`; the task env runs tasks on the CPU
+    (``torch.device("cpu")``), next to the simulator's state.
 
     A task that follows a reference motion (tracking, in-betweening) also declares a keyword
     ``motions``: the task stage then passes the env's :class:`~mocap.motion.library.MotionLibrary`.

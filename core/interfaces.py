@@ -48,6 +48,8 @@ class Simulator(ABC):
 
     skeleton: Skeleton
     num_envs: int
+    #: where :attr:`state`'s tensors live (a :class:`torch.device`; the MuJoCo simulator: the CPU)
+    device: torch.device = torch.device("cpu")
 
     @property
     @abstractmethod

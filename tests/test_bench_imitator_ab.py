@@ -17,7 +17,7 @@ def ab():
 def _arm(tmp: Path, name: str, clips: int, lengths: list[float]) -> str:
     work = tmp / name
     (work / "runs" / "tts").mkdir(parents=True)
-    rows = [{"stage": "imitator", "step": i + 1, "episode/length": v, "episode/success": 0.5} for i, v in enumerate(lengths)]
+    rows = [{"stage": "imitator", "step": i + 1, "episode/length": v, "episode/success": 0.5, "lr": 2e-6, "approx_kl": 0.012} for i, v in enumerate(lengths)]
     rows.append({"stage": "eval", "step": 0, "episode/length": 1e9})  # another stage: ignored
     (work / "runs" / "tts" / "metrics.jsonl").write_text("\n".join(json.dumps(r) for r in rows) + "\n")
     point = {"minutes": 15.0, "env_steps": 2_000_000, "clips_tracked": clips, "clips_total": 15}
@@ -42,6 +42,7 @@ def test_arms_table_and_training_tail(ab, tmp_path: Path):
     assert b["training_last_20_iterations"]["episode/length"] == pytest.approx(50.0)
     assert result["start"]["clips_tracked"] == 9 and result["start"]["tracked"] == ["walk"]
     md = out.with_suffix(".md").read_text()
-    assert "| a | `x=a` | 15.0 | 2.00M | 9/15 | 80.0 | 140.0 | 100.0 | 0.50 | 2.10 |" in md
+    assert "| a | `x=a` | 15.0 | 2.00M | 9/15 | 80.0 | 140.0 | 100.0 | 0.50 | 2.0e-06 | 0.012 | 2.10 |" in md
+    assert "the same wall-clock budget" in md
     assert "Start: 9/15 clips, MPJPE-g 87.0 mm" in md
     assert out.with_suffix(".png").stat().st_size > 0

@@ -26,10 +26,47 @@ def test_mujoco_simulator_keeps_the_contract(amp):
     assert "physics state round-trip" in report
 
 
-@pytest.mark.parametrize("name", ["speed", "reach", "point_goal", "terrain"])
-def test_builtin_tasks_keep_the_contract(amp, name):
-    task = get_plugins().get("task", name).build(None, skeleton=amp, num_envs=4, seed=0)
-    assert "state_dict round-trip" in check_task(task, amp, num_envs=4)
+BUILTIN_TASKS = ["generation", "hmd_tracking", "inbetween", "motion_tracking", "point_goal", "reach", "speed", "strike", "terrain", "vr_tracking"]
+
+
+def test_every_registered_task_is_checked():
+    assert sorted(get_plugins().components["task"]) == BUILTIN_TASKS
+
+
+@pytest.mark.parametrize("name", BUILTIN_TASKS)
+def test_builtin_tasks_keep_the_contract_and_report_only_declared_metrics(amp, name):
+    """Every built-in task, as the task env wires it (motions for the tasks that take them, the
+    simulator with the task's ``sim_overrides`` attached), passes ``check_task`` including the rule
+    that every metric key it reports is declared with a display name."""
+    import inspect
+
+    from mocap.motion.library import MotionLibrary
+
+    bundled_library = MotionLibrary(get_plugins().get("motion_source", "deepmimic").build(None).load(amp), amp)
+    component = get_plugins().get("task", name)
+    extra = {"motions": bundled_library} if "motions" in inspect.signature(component.resolved_factory()).parameters else {}
+    task = component.build(None, skeleton=amp, num_envs=4, device="cpu", **extra)
+    task.attach_motions(bundled_library)
+    sim = None
+    if task.sim_overrides:
+        sim_c = get_plugins().get("simulator", "mujoco")
+        params = sim_c.validate_params(dict(task.sim_overrides))
+        sim = sim_c.build(params, skeleton=amp, num_envs=4, seed=0)
+        task.attach(sim)
+    try:
+        assert "declared metrics" in check_task(task, amp, num_envs=4, declared=component.metrics, sim=sim)
+    finally:
+        if sim is not None:
+            sim.close()
+
+
+def test_a_task_reporting_an_undeclared_metric_is_caught(amp):
+    component = get_plugins().get("task", "speed")
+    task = component.build(None, skeleton=amp, num_envs=4, seed=0)
+    real = task.metrics
+    task.metrics = lambda: {**real(), "mystery": 1.0}  # type: ignore[method-assign]
+    with pytest.raises(ContractViolation, match="undeclared key\\(s\\) mystery"):
+        check_task(task, amp, num_envs=4, declared=component.metrics)
 
 
 def _obs(n: int, p: int, g: int) -> Observations:

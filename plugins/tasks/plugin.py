@@ -45,6 +45,7 @@ _SHOWN: dict[str, MetricInfo] = {
     "traj_error": MetricInfo("trajectory error", "m"),
     "episode_traj_error": MetricInfo("episode trajectory error", "m"),
     "energy": MetricInfo("energy penalty"),
+    "far_rate": MetricInfo("off-trajectory rate"),
     "keyframe_gmpjpe_mm": MetricInfo("keyframe MPJPE-g", "mm"),
     "keyframe_mpjpe_mm": MetricInfo("keyframe MPJPE-l", "mm"),
     "keyframe_root_error": MetricInfo("keyframe root error", "m"),
@@ -63,7 +64,7 @@ _REPORTED: dict[str, tuple[str, ...]] = {
     "vr_tracking": ("success", "mpjpe_g", "mpjpe_l", "tracked_error", "episodes"),
     "hmd_tracking": ("success", "mpjpe_g", "mpjpe_l", "tracked_error", "episodes"),
     "motion_tracking": ("success", "mpjpe_g", "mpjpe_l", "episodes"),
-    "terrain": ("traj_error", "episode_traj_error", "energy", "fall_rate", "episodes"),
+    "terrain": ("traj_error", "episode_traj_error", "energy", "fall_rate", "far_rate", "episodes"),
     "point_goal": _GOALS,
     "inbetween": (
         "keyframe_gmpjpe_mm",
