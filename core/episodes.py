@@ -124,7 +124,7 @@ class ReferenceStarts:
         self.library, self.dt = library, float(dt)
         self.control_grid, self.start_sampler = bool(control_grid), start_sampler
         dev = library.device
-        self.durations = library.durations.to(dev, torch.float64)
+        self.durations = library.durations64.to(dev)  # float64: a float32 duration can drop the last grid start
         self.loops = library.loops.to(dev) if loops else torch.zeros(len(library.clip_names), dtype=torch.bool, device=dev)
 
     def sample(self, n: int, generator: torch.Generator) -> tuple[Tensor, Tensor]:

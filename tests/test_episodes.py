@@ -66,6 +66,7 @@ class _Lib:
     device = torch.device("cpu")
     clip_names = ["a", "b", "c"]
     durations = torch.tensor([1.0, 0.05, 2.0], dtype=torch.float64)
+    durations64 = durations
     loops = torch.tensor([False, False, True])
 
     def sample(self, n, generator=None):
@@ -128,3 +129,22 @@ def test_episode_book_state_round_trips_and_refuses_another_env_count():
     assert torch.equal(other.steps, book.steps) and torch.equal(other.returns, book.returns)
     with pytest.raises(ValueError, match="expected \\(2,\\)"):
         EpisodeBook(2).load_state_dict(book.state_dict())
+
+
+def test_reference_starts_reach_the_last_start_frame_of_every_bundled_clip(amp):
+    """The clamp at ``duration - dt`` and the grid compare float64 durations: with the library's
+    float32 durations, clips whose duration rounds down never started at their last frame pair."""
+    from mocap.motion.library import MotionLibrary
+    from mocap.plugins import get_plugins
+
+    lib = MotionLibrary(get_plugins().get("motion_source", "deepmimic").build(None).load(amp), amp)
+    dt = 1.0 / 30.0
+    rs = ReferenceStarts(lib, dt, control_grid=True, loops=False)
+    dur = lib.durations64
+    rounded_down = (lib.durations.double() < dur).tolist()
+    assert any(rounded_down)  # the case the bug needs exists in the bundled clips
+    clips, t0 = rs.sample(20_000, torch.Generator().manual_seed(0))
+    for c in range(len(lib.clip_names)):
+        last = torch.floor((dur[c] - dt) / dt + 1e-9) * dt
+        got = t0[clips == c]
+        assert got.numel() > 0 and torch.isclose(got.max(), last, atol=1e-9), (lib.clip_names[c], float(got.max()), float(last))

@@ -309,8 +309,14 @@ class MotionLibrary:
 
     @property
     def durations(self) -> Tensor:
-        """(C,) first-to-last-frame time per clip, s (a looping clip's period)."""
+        """(C,) first-to-last-frame time per clip, s (a looping clip's period), in the library's dtype."""
         return self._dur64.to(self.dtype)
+
+    @property
+    def durations64(self) -> Tensor:
+        """(C,) :attr:`durations` in float64, unrounded (what start times on the control grid are
+        compared with: a float32 duration can fall just below a grid time)."""
+        return self._dur64.clone()
 
     @property
     def loops(self) -> Tensor:

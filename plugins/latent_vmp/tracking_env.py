@@ -84,9 +84,6 @@ class VmpTrackingEnv:
         self._gen.manual_seed(int(seed))
         # RSI and reference jumps; every clip non-looping (at a clip's end the reference jumps or the episode ends)
         self.starts = ReferenceStarts(lib, self.dt, control_grid=True, loops=False)
-        # the exact (float64) clip durations: ReferenceStarts takes library.durations, rounded to the library's dtype
-        # (float32), which moves the clamp at duration - dt below the grid point and drops a clip's last start frame
-        self.starts.durations = lib._dur64.to(dev)
         # reward: the raw terms of tracking_reward.REWARD_TERMS weighted by the params' VmpRewardWeights
         self.rewards = RewardTerms(vmp_reward_weights(p.reward, p.reward_form), owner="reward")
         self.terminations = TerminationTerms(("ee", "unstable"))
