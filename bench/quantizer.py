@@ -124,9 +124,7 @@ def evaluate(kind: str, model: torch.nn.Module, x: Tensor, codebook_size: int) -
     return {"relative_mse": rel_mse, "level1_code_usage": used}
 
 
-def run_size(
-    cfg: dict[str, Any], batch: int, steps: int, warmup: int, heldout: Tensor, seed: int, relative: Sequence[float] = ()
-) -> dict[str, Any]:
+def run_size(cfg: dict[str, Any], batch: int, steps: int, warmup: int, heldout: Tensor, seed: int, relative: Sequence[float] = ()) -> dict[str, Any]:
     """One batch size: ours and the reference at the config's threshold (timed alternately), plus ours
     at each ``relative`` threshold (arms ``ours_relative_<t>``, same batches)."""
     sample = make_data(cfg["dim"], seed)
@@ -173,9 +171,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--threads", type=int, default=None, help="torch threads (default: torch's default)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--dead-threshold", type=float, default=2.0, help="absolute dead-code threshold of both libraries (default 2)")
-    ap.add_argument(
-        "--relative", nargs="*", type=float, default=[], help="extra arms: ours with dead_threshold_mode relative at these fractions"
-    )
+    ap.add_argument("--relative", nargs="*", type=float, default=[], help="extra arms: ours with dead_threshold_mode relative at these fractions")
     ap.add_argument("--out", type=Path, default=None, help="output JSON (default bench/results/quantizer.json; --quick: quantizer_quick.json)")
     args = ap.parse_args(argv)
     if args.threads:

@@ -122,9 +122,7 @@ def evaluate(target: Path) -> tuple[dict, object]:
     plugins = get_plugins()
     info = load_evaluation_target(target, plugins)
     loaded = build_evaluation_target(info, plugins)
-    table = evaluate_imitator(
-        loaded.policy, loaded.library, loaded.make_sim, ImitationEvalParams(video=False), [*default_metrics(), JointMAE(loaded.skeleton)]
-    )
+    table = evaluate_imitator(loaded.policy, loaded.library, loaded.make_sim, ImitationEvalParams(video=False), [*default_metrics(), JointMAE(loaded.skeleton)])
     agg = table["aggregate"]
     # the paper's section 5.4 latent metrics, labels = clip names (the same VAE under both trackers)
     label = latent_label_metrics(loaded.latent, loaded.library) if loaded.latent is not None and loaded.library.num_clips >= 2 else {}

@@ -45,10 +45,7 @@ def missing_package_message(exc: ImportError) -> str | None:
         return None
     package = PIP_NAMES.get(top, top)
     extra = "; it provides the DeepMimic clips and the amp humanoid's URDF" if package == "pybullet" else ""
-    return (
-        f"the Python package {package!r} is missing or broken (importing {name!r} failed{extra}); "
-        f"install it into this environment: pip install {package}"
-    )
+    return f"the Python package {package!r} is missing or broken (importing {name!r} failed{extra}); install it into this environment: pip install {package}"
 
 
 def fail(message: str, code: int = EXIT_USER_ERROR) -> "typer.Exit":
@@ -95,9 +92,7 @@ def cmd_run(
     spec: Annotated[Path, typer.Argument(help="spec YAML file")],
     set_: SetOption = None,
     out: Annotated[Optional[Path], typer.Option("--out", "-o", help="run directory (default: runs/<spec name>)")] = None,
-    store: Annotated[
-        Optional[Path], typer.Option("--store", help="artifact store shared between runs (default: <run dir>/../artifacts)")
-    ] = None,
+    store: Annotated[Optional[Path], typer.Option("--store", help="artifact store shared between runs (default: <run dir>/../artifacts)")] = None,
     jobs: Annotated[int, typer.Option("--jobs", "-j", min=1, help="comparison specs: cells run at the same time (processes)")] = 1,
     executor: Annotated[
         str,
@@ -116,9 +111,7 @@ def cmd_run(
             show_default=False,
         ),
     ] = None,
-    ray_cpus_per_cell: Annotated[
-        float, typer.Option("--ray-cpus-per-cell", min=0.01, help="with --executor ray: CPUs Ray reserves for each cell")
-    ] = 1.0,
+    ray_cpus_per_cell: Annotated[float, typer.Option("--ray-cpus-per-cell", min=0.01, help="with --executor ray: CPUs Ray reserves for each cell")] = 1.0,
 ) -> None:
     """Run a spec: imitator -> latent -> task -> eval, reusing artifacts of identical stages.
 
@@ -142,8 +135,15 @@ def cmd_run(
                 import_ray()  # before anything runs
             console.print(f"comparison: {len(cells)} cells -> {out_dir}/<cell>/", highlight=False)
             status = run_cells(
-                cells, _plugins(), out_dir, console, jobs=jobs, store=store,
-                executor=executor, ray_address=ray_address, cpus_per_cell=ray_cpus_per_cell,
+                cells,
+                _plugins(),
+                out_dir,
+                console,
+                jobs=jobs,
+                store=store,
+                executor=executor,
+                ray_address=ray_address,
+                cpus_per_cell=ray_cpus_per_cell,
             )
         except ExecutorError as exc:
             from rich.markup import escape
@@ -159,8 +159,7 @@ def cmd_run(
         failed = [name for name, s in status.items() if s != "done"]
         console.print(f"[bold green]done[/]: {len(cells) - len(failed)}/{len(cells)} cells; comparison: {out_dir / 'comparison.md'}", highlight=False)
         console.print(
-            f"next: each cell's report is {out_dir}/<cell>/report.md; `mocap eval {out_dir}/<cell>` prints its per-clip table; "
-            "more specs to run are in specs/",
+            f"next: each cell's report is {out_dir}/<cell>/report.md; `mocap eval {out_dir}/<cell>` prints its per-clip table; more specs to run are in specs/",
             highlight=False,
         )
         if failed:
@@ -178,10 +177,7 @@ def cmd_run(
     try:
         records = run_pipeline(resolved, _plugins(), out_dir, store=store, console=console)
     except PipelineInterrupted as exc:
-        err_console.print(
-            f"[yellow]interrupted[/] during stage {exc.args[0]!r}; its checkpoint is saved. "
-            f"Run the same command again to resume."
-        )
+        err_console.print(f"[yellow]interrupted[/] during stage {exc.args[0]!r}; its checkpoint is saved. Run the same command again to resume.")
         raise typer.Exit(EXIT_INTERRUPTED) from None
     console.print(f"[bold green]done[/]: {len(records)} stage(s); report: {out_dir / 'report.md'}", highlight=False)
     from mocap.report import headline
@@ -229,9 +225,7 @@ def cmd_plugins(as_json: Annotated[bool, typer.Option("--json", help="machine-re
     for kind, comps in pset.components.items():
         for name, comp in sorted(comps.items()):
             registered.setdefault(comp.plugin, []).append(f"{kind}:{name}")
-    duplicates = [
-        {"kind": k, "name": n, "plugins": owners} for (k, n), owners in sorted(pset.duplicates.items())
-    ]
+    duplicates = [{"kind": k, "name": n, "plugins": owners} for (k, n), owners in sorted(pset.duplicates.items())]
     if as_json:
         data = {
             "plugins": [
@@ -259,8 +253,7 @@ def cmd_plugins(as_json: Annotated[bool, typer.Option("--json", help="machine-re
         (console if console.is_terminal else Console(width=1000, soft_wrap=True)).print(table)
     for dup in duplicates:
         err_console.print(
-            f"[red]error:[/] {dup['kind']} {dup['name']!r} is registered by more than one plugin: "
-            f"{' and '.join(repr(o) for o in dup['plugins'])}",
+            f"[red]error:[/] {dup['kind']} {dup['name']!r} is registered by more than one plugin: {' and '.join(repr(o) for o in dup['plugins'])}",
             highlight=False,
         )
     if duplicates:
@@ -279,9 +272,7 @@ def cmd_checkpoint_convert(
     from mocap.checkpoint import convert_checkpoint
 
     if not trust:
-        raise UserError(
-            f"{path}: converting a checkpoint runs any code pickled in it; only convert files you trust, and say so with --trust"
-        )
+        raise UserError(f"{path}: converting a checkpoint runs any code pickled in it; only convert files you trust, and say so with --trust")
     err_console.print(f"[yellow]warning:[/] unpickling {path} without restriction (trusted by --trust)", highlight=False)
     dst = convert_checkpoint(path, out)
     console.print(f"wrote {dst} (loads without running code)", highlight=False)

@@ -245,4 +245,3 @@ def check_latent_space(latent: LatentSpace, obs: Observations, action_dim: int) 
 
 
 __all__ = ["ContractViolation", "check_latent_space", "check_simulator", "check_task", "fake_sim_state"]
-

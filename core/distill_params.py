@@ -38,9 +38,7 @@ class DistillParams(BaseModel):
         description="who drives the simulator: 'student' ([P] PULSE/DAgger: the student acts, the teacher labels), "
         "'teacher' (behaviour cloning) or 'mixture' (DAgger's β: the teacher with probability β per env and step)",
     )
-    mixture_beta: tuple[float, float] = Field(
-        (1.0, 0.0), description="'mixture': β at progress 0 and from mixture_anneal_end on (linear in between)"
-    )
+    mixture_beta: tuple[float, float] = Field((1.0, 0.0), description="'mixture': β at progress 0 and from mixture_anneal_end on (linear in between)")
     mixture_anneal_end: float = Field(0.5, gt=0, le=1, description="'mixture': progress at which β reaches mixture_beta[1]")
     sample_latent: bool = Field(True, description="rollouts sample z from the encoder ([P]/[CODE]); false: z = encoder mean")
     termination_threshold: float = Field(
@@ -67,13 +65,9 @@ class DistillParams(BaseModel):
         50, ge=0, description="iterations between evaluations of the student as an imitator (also at the end); 0 disables ([CODE] 500 epochs)"
     )
     eval_num_envs: int = Field(64, ge=1, description="clips evaluated in parallel")
-    eval_horizon: float | None = Field(
-        None, gt=0, description="seconds per evaluation episode of looping clips; None: episode_steps × dt"
-    )
+    eval_horizon: float | None = Field(None, gt=0, description="seconds per evaluation episode of looping clips; None: episode_steps × dt")
     torch_threads: ThreadCount | None = Field(1, description="torch intra-op threads for this stage (None: keep the process setting)")
-    max_consecutive_faults: int = Field(
-        10, ge=0, description="stop after this many consecutive batches with non-finite values (each is skipped); 0: only skip"
-    )
+    max_consecutive_faults: int = Field(10, ge=0, description="stop after this many consecutive batches with non-finite values (each is skipped); 0: only skip")
     checkpoint_every: int = Field(10, ge=1, description="iterations between checkpoints (also at the end and on Ctrl-C)")
     print_every: int = Field(10, ge=1, description="iterations between progress lines when the console is not a terminal")
 

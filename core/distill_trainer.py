@@ -122,9 +122,7 @@ class DistillTrainer(Trainer):
         try:
             teacher: Imitator = ctx.stage_component("imitator", checkpoint=upstream.checkpoint if upstream else None)
         except KeyError:
-            raise DistillError(
-                "the distill trainer needs a teacher: add an `imitator:` section (a trained imitator or its checkpoint) to the spec"
-            ) from None
+            raise DistillError("the distill trainer needs a teacher: add an `imitator:` section (a trained imitator or its checkpoint) to the spec") from None
         if p.label == "pd_targets":
             teacher = PDTargetTeacher(teacher)
         student = ctx.stage_component("latent")

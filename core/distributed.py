@@ -113,8 +113,7 @@ def init(device: torch.device | None = None) -> torch.device:
         count = torch.cuda.device_count()
         if local_rank() >= count:
             raise StageFailed(
-                f"rank {rank()} has LOCAL_RANK {local_rank()} but this node has {count} CUDA device(s): "
-                "start at most one process per GPU (--nproc_per_node)"
+                f"rank {rank()} has LOCAL_RANK {local_rank()} but this node has {count} CUDA device(s): start at most one process per GPU (--nproc_per_node)"
             )
         device = torch.device("cuda", local_rank())
         torch.cuda.set_device(device)

@@ -235,9 +235,7 @@ def _is_distilled(path: Path) -> bool:
     return load_checkpoint(path).get("format") in (LATENT_FORMAT, CHECKPOINT_FORMAT)
 
 
-def build_evaluation_target(
-    target: EvalTarget, plugins: Any, *, motions: str | None = None, device: str = "cpu", use_latent: bool = True
-) -> LoadedTarget:
+def build_evaluation_target(target: EvalTarget, plugins: Any, *, motions: str | None = None, device: str = "cpu", use_latent: bool = True) -> LoadedTarget:
     """Build the skeleton, motion library (``motions``: another source, default params), the
     imitator, the latent space (when ``target`` has one and ``use_latent``) and the simulator factory."""
     from mocap.distill_files import load_latent_state
@@ -259,9 +257,7 @@ def build_evaluation_target(
     def make_sim(n: int) -> Simulator:
         return sim_component.build(sim_params, skeleton=skeleton, num_envs=n, seed=spec.seed)
 
-    own_tracker = spec.imitator is None or (
-        use_latent and target.latent_checkpoint is not None and not _is_distilled(Path(target.latent_checkpoint))
-    )
+    own_tracker = spec.imitator is None or (use_latent and target.latent_checkpoint is not None and not _is_distilled(Path(target.latent_checkpoint)))
     if own_tracker:  # a latent space that imitates on its own (VMP's tracker), even where the spec names an imitator
         from mocap.errors import UserError
 

@@ -39,9 +39,7 @@ if TYPE_CHECKING:  # pragma: no cover
 class ImitationEvalParams(BaseModel):
     model_config = ConfigDict(extra="forbid")
     num_envs: int = Field(64, ge=1, description="episodes simulated in parallel")
-    horizon: float | None = Field(
-        None, gt=0, description="seconds per episode for looping clips (None: one period of the clip)"
-    )
+    horizon: float | None = Field(None, gt=0, description="seconds per episode for looping clips (None: one period of the clip)")
     threshold: float = Field(0.5, gt=0, description="failure threshold on the mean body error, m")
     success_exclude: list[str] = Field(
         default_factory=list,
@@ -60,9 +58,7 @@ class ImitationEvalParams(BaseModel):
 
 class EvalSuiteParams(BaseModel):  # the trainer ``eval_suite`` (:mod:`mocap.suite`)
     model_config = ConfigDict(extra="forbid")
-    imitation: ImitationEvalParams | None = Field(
-        default_factory=ImitationEvalParams, description="imitation protocol on every clip (None: skip)"
-    )
+    imitation: ImitationEvalParams | None = Field(default_factory=ImitationEvalParams, description="imitation protocol on every clip (None: skip)")
     generation: GenerationParams | None = Field(
         default_factory=GenerationParams, description="random generation from the prior (None: skip; skipped anyway without a prior)"
     )
@@ -134,18 +130,12 @@ def register_commands(app):  # type: ignore[no-untyped-def]
         target: Annotated[
             Path, typer.Argument(help="a checkpoint (policy.pt, latent.pt), a checkpoint directory (checkpoints/<name>), a run directory or a spec")
         ],
-        motions: Annotated[
-            Optional[str], typer.Option("--motions", help="evaluate on this motion source instead of the training one (default params)")
-        ] = None,
+        motions: Annotated[Optional[str], typer.Option("--motions", help="evaluate on this motion source instead of the training one (default params)")] = None,
         json_out: Annotated[Optional[Path], typer.Option("--json", help="write the result table as JSON")] = None,
         video: Annotated[Optional[Path], typer.Option("--video", help="write one video per clip (reference as a ghost) here")] = None,
-        loop: Annotated[
-            Optional[float], typer.Option("--loop", help="robustness protocol: looping clips keep cycling for this many seconds")
-        ] = None,
+        loop: Annotated[Optional[float], typer.Option("--loop", help="robustness protocol: looping clips keep cycling for this many seconds")] = None,
         num_envs: Annotated[int, typer.Option(help="clips simulated in parallel")] = 64,
-        imitator_only: Annotated[
-            bool, typer.Option("--imitator-only", help="for a latent space: evaluate the imitator it was distilled from instead")
-        ] = False,
+        imitator_only: Annotated[bool, typer.Option("--imitator-only", help="for a latent space: evaluate the imitator it was distilled from instead")] = False,
     ) -> None:
         """Evaluate an imitator or a latent space with the imitation protocol (each clip from its first frame, deterministic)."""
         import json
@@ -232,9 +222,7 @@ _MOVED = {
         + ("render_table", "rollout_imitation", "success_bodies"),
         "mocap.imitation_eval",
     ),
-    **dict.fromkeys(
-        ("EvalTarget", "LoadedTarget", "build_evaluation_target", "check_trained_humanoid", "load_evaluation_target"), "mocap.eval_targets"
-    ),
+    **dict.fromkeys(("EvalTarget", "LoadedTarget", "build_evaluation_target", "check_trained_humanoid", "load_evaluation_target"), "mocap.eval_targets"),
 }
 
 

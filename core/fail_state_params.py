@@ -11,9 +11,7 @@ class FailStateParams(BaseModel):
     phc/env/tasks/humanoid_im_getup.py), for recovery training."""
 
     model_config = ConfigDict(extra="forbid")
-    fall_init_prob: float = Field(
-        0.0, ge=0.0, le=1.0, description="share of resets from a fallen state ([C] 0.3; 1.0 in the code's first get-up phase)"
-    )
+    fall_init_prob: float = Field(0.0, ge=0.0, le=1.0, description="share of resets from a fallen state ([C] 0.3; 1.0 in the code's first get-up phase)")
     far_init_prob: float = Field(0.0, ge=0.0, le=1.0, description="share of the other resets moved away from the reference ([P] far states)")
     far_init_range: tuple[float, float] = Field((2.0, 5.0), description="distance of a far start from the reference root, m ([P] 2-5)")
     recovery_episode_prob: float = Field(

@@ -87,9 +87,7 @@ def assign_rows(dst: HumanoidState, ids: Tensor, src: HumanoidState) -> None:
         getattr(dst, name)[ids] = getattr(src, name).to(getattr(dst, name))
 
 
-def fail_starts(
-    start: HumanoidState, pool: HumanoidState | None, params: FailStateParams, generator: torch.Generator
-) -> tuple[HumanoidState, Tensor]:
+def fail_starts(start: HumanoidState, pool: HumanoidState | None, params: FailStateParams, generator: torch.Generator) -> tuple[HumanoidState, Tensor]:
     """Replace some reference starts (rows of ``start``) by fallen states from ``pool`` (moved to the
     reference root's xy) or far ones (the reference moved ``far_init_range`` m in a random direction).
     Returns the new start states and the (n,) bool mask of the rows that got a fallen or far start."""

@@ -65,9 +65,7 @@ class FaultGuard:
                 return False
         return True
 
-    def step(
-        self, optimizer: torch.optim.Optimizer, loss: Tensor, params: Iterable[Tensor], max_grad_norm: float | None
-    ) -> tuple[bool, float]:
+    def step(self, optimizer: torch.optim.Optimizer, loss: Tensor, params: Iterable[Tensor], max_grad_norm: float | None) -> tuple[bool, float]:
         """Backward already done: clip gradients and step unless the loss or a gradient is not
         finite. Returns ``(stepped, grad_norm)``; on a skip the gradients are cleared."""
         params = list(params)

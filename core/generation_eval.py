@@ -28,7 +28,6 @@ def heading_frame(root_pos: Tensor, root_rot: Tensor) -> tuple[Tensor, Tensor]:
     return origin, q
 
 
-
 def in_start_frame(body_pos: Tensor, origin: Tensor, heading: Tensor) -> Tensor:
     """(T, N, B, 3) body positions expressed in each rollout's start frame (origin, heading (N, ...))."""
     T, N, B, _ = body_pos.shape
@@ -37,13 +36,11 @@ def in_start_frame(body_pos: Tensor, origin: Tensor, heading: Tensor) -> Tensor:
     return quat_apply(q, rel)
 
 
-
 def fallen_down(body_pos: Tensor, body_contact: Tensor, allowed: Tensor, fall_height: float) -> Tensor:
     """(N,) bool: a body other than the ``allowed`` ones (the feet) touches the ground *and* its origin
     is below ``fall_height`` (the generation protocol's fall, PULSE's code: contact and height < 0.15 m)."""
     below = body_pos[..., 2] < fall_height
     return (body_contact & ~allowed.to(body_contact.device) & below).any(-1)
-
 
 
 def pairwise_diversity(traj: Tensor) -> float:
@@ -58,7 +55,6 @@ def pairwise_diversity(traj: Tensor) -> float:
         total += float(d.sum())
         pairs += d.numel()
     return total / pairs
-
 
 
 def motion_matching(generated: Tensor, dataset: Tensor, threshold: float, chunk: int = 4096) -> dict[str, float]:
@@ -88,7 +84,6 @@ def motion_matching(generated: Tensor, dataset: Tensor, threshold: float, chunk:
     }
 
 
-
 def dataset_transitions(lib: MotionLibrary, dt: float, sixd: SixD = "zhou") -> Tensor:
     """(K, 2P) proprioception pairs (s_{t-1}, s_t) of every clip sampled at the control rate."""
     rows = []
@@ -101,7 +96,6 @@ def dataset_transitions(lib: MotionLibrary, dt: float, sixd: SixD = "zhou") -> T
         feat = proprioception(lib.frames(ids, times), sixd).float().cpu()
         rows.append(torch.cat([feat[:-1], feat[1:]], -1))
     return torch.cat(rows)
-
 
 
 def start_states(lib: MotionLibrary, n: int, skeleton: Any, min_height: float, generator: torch.Generator) -> tuple[Tensor, Tensor]:
@@ -124,11 +118,9 @@ def start_states(lib: MotionLibrary, n: int, skeleton: Any, min_height: float, g
     return torch.cat(ids_out)[:n], torch.cat(t_out)[:n]
 
 
-
 def _reference_free(obs: Observations) -> Observations:
     """The observation a generation rollout gives the latent: proprioception only."""
     return Observations(proprio=obs.proprio, goal=None, extra={})
-
 
 
 def evaluate_generation(
@@ -240,14 +232,12 @@ def evaluate_generation(
     return result
 
 
-
 def generate_from_target(loaded: Any, params: GenerationParams, *, video: Path | None = None, console: Any = None) -> dict[str, Any]:
     """:func:`evaluate_generation` of a built evaluation target (``mocap.eval_targets.build_evaluation_target``)."""
     own = bool(loaded.latent.decodes_pd_targets)  # VMP: random_action gives PD targets
     imitator = None if own else loaded.imitator
     mapping = (lambda obs, out: out) if own else loaded.to_pd_targets
     return evaluate_generation(loaded.latent, imitator, mapping, loaded.library, loaded.make_sim, params, video=video, console=console)
-
 
 
 class GenerationEval(Trainer):
@@ -267,9 +257,7 @@ class GenerationEval(Trainer):
         if latent_stage is None or latent_stage.checkpoint is None:
             raise StageFailed("generation_eval needs a trained latent stage")
         upstream = ctx.upstream.get("imitator")
-        imitator = (
-            ctx.stage_component("imitator", checkpoint=upstream.checkpoint if upstream else None) if ctx.spec.imitator is not None else None
-        )
+        imitator = ctx.stage_component("imitator", checkpoint=upstream.checkpoint if upstream else None) if ctx.spec.imitator is not None else None
         latent = ctx.stage_component("latent", checkpoint=latent_stage.checkpoint)
         latent.eval()
         if latent.decodes_pd_targets:  # VMP: random_action already gives PD targets

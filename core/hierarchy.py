@@ -21,9 +21,7 @@ from mocap.plugins import lazy
 # ---------------------------------------------------------------------------------- scratch
 class ScratchParams(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    range_scale: float = Field(
-        1.0, gt=0, description="a = ±1 reaches this fraction of each joint's half range around its midpoint (PHC absolute map: 1.0)"
-    )
+    range_scale: float = Field(1.0, gt=0, description="a = ±1 reaches this fraction of each joint's half range around its midpoint (PHC absolute map: 1.0)")
 
 
 @hookimpl

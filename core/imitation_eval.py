@@ -196,9 +196,7 @@ def evaluate_imitator(
     }
 
 
-def record_video(
-    imitator: Imitator, lib: MotionLibrary, make_sim: Callable[[int], Simulator], clip: str, seconds: float, path: Path
-) -> Path | None:
+def record_video(imitator: Imitator, lib: MotionLibrary, make_sim: Callable[[int], Simulator], clip: str, seconds: float, path: Path) -> Path | None:
     """Roll the imitator out on ``clip`` and save a video with the reference drawn as a ghost.
 
     Returns None when the simulator cannot render (:meth:`Simulator.make_recorder` gives None).
@@ -245,9 +243,7 @@ class ImitationEval(Trainer):
             ctx.console.print(f"[yellow]skipped[/] {path}: {reason}")
         lib = MotionLibrary(motion_set, skeleton)
         upstream = ctx.upstream.get("imitator")
-        imitator = (
-            ctx.stage_component("imitator", checkpoint=upstream.checkpoint if upstream else None) if ctx.spec.imitator is not None else None
-        )
+        imitator = ctx.stage_component("imitator", checkpoint=upstream.checkpoint if upstream else None) if ctx.spec.imitator is not None else None
         latent_stage = ctx.upstream.get("latent")
 
         def make_sim(n: int) -> Simulator:

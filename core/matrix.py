@@ -177,9 +177,7 @@ def _ray_cell(spec_file: str, cell_dir: str, store: str, cwd: str) -> str:
     """A Ray task: run one cell's command with this worker's Python, output in ``<cell>/run.log``.
     Cancelled (Ctrl-C in the driver), it passes SIGINT on so the cell saves its checkpoint."""
     with (Path(cell_dir) / "run.log").open("w") as log:
-        proc = subprocess.Popen(
-            cell_command(spec_file, cell_dir, store), stdout=log, stderr=subprocess.STDOUT, cwd=cwd if os.path.isdir(cwd) else None
-        )
+        proc = subprocess.Popen(cell_command(spec_file, cell_dir, store), stdout=log, stderr=subprocess.STDOUT, cwd=cwd if os.path.isdir(cwd) else None)
         try:
             return _outcome(proc.wait(), cell_dir)
         except BaseException:

@@ -108,9 +108,7 @@ def rotation_error(tr: Trajectories) -> Tensor:
     return _masked_mean(angle, tr.valid())
 
 
-def success(
-    tr: Trajectories, threshold: float = 0.5, grace_frames: int = 0, reduce: str = "mean", bodies: Sequence[int] | None = None
-) -> Tensor:
+def success(tr: Trajectories, threshold: float = 0.5, grace_frames: int = 0, reduce: str = "mean", bodies: Sequence[int] | None = None) -> Tensor:
     """(N,) 1.0 where the episode never exceeded ``threshold`` metres (mean or max over bodies; over
     the body indices ``bodies`` only when given, e.g. PHC's 20 evaluation bodies on smpl)."""
     err = torch.linalg.vector_norm(tr.sim - tr.ref, dim=-1)

@@ -268,14 +268,10 @@ def register_commands(app: Any) -> None:
         ] = "0,1,2,3",
         seed: Annotated[int, typer.Option("--seed", help="seed of the noise (default level k uses seed + k)")] = 0,
         loop: Annotated[Optional[float], typer.Option("--loop", help="looping clips keep cycling for this many seconds")] = None,
-        smooth: Annotated[
-            float, typer.Option("--smooth", help="causal exponential smoothing of the stream, a in (0, 1] (1: none)")
-        ] = 1.0,
+        smooth: Annotated[float, typer.Option("--smooth", help="causal exponential smoothing of the stream, a in (0, 1] (1: none)")] = 1.0,
         num_envs: Annotated[int, typer.Option(help="clips simulated in parallel")] = 64,
         json_out: Annotated[Optional[Path], typer.Option("--json", help="write the result as JSON")] = None,
-        imitator_only: Annotated[
-            bool, typer.Option("--imitator-only", help="for a latent space: evaluate the imitator it was distilled from")
-        ] = False,
+        imitator_only: Annotated[bool, typer.Option("--imitator-only", help="for a latent space: evaluate the imitator it was distilled from")] = False,
     ) -> None:
         """Imitation from references with synthetic estimator noise (jitter, dropped frames), measured against the clean clips."""
         import json

@@ -72,9 +72,7 @@ ROT_GOAL_COLUMNS: dict[str, slice] = _columns(ROT_GOAL_FEATURES)
 #: per-body column slices of each keypoint-goal feature (within the 9 columns of one body)
 KEYPOINT_GOAL_COLUMNS: dict[str, slice] = _columns(KEYPOINT_GOAL_FEATURES)
 #: the rotation-goal columns (per body) that the keypoint goal's 9 columns equal, in order
-KEYPOINT_FROM_ROT: tuple[int, ...] = tuple(
-    c for name, _ in KEYPOINT_GOAL_FEATURES for c in range(ROT_GOAL_COLUMNS[name].start, ROT_GOAL_COLUMNS[name].stop)
-)
+KEYPOINT_FROM_ROT: tuple[int, ...] = tuple(c for name, _ in KEYPOINT_GOAL_FEATURES for c in range(ROT_GOAL_COLUMNS[name].start, ROT_GOAL_COLUMNS[name].stop))
 
 ROT_GOAL_PER_BODY = sum(w for _, w in ROT_GOAL_FEATURES)  # 24
 KEYPOINT_GOAL_PER_BODY = sum(w for _, w in KEYPOINT_GOAL_FEATURES)  # 9
@@ -245,9 +243,7 @@ def proprioception_and_goal(
     raise ValueError(f"unknown imitation goal {kind!r}; choose 'rot' or 'keypoint'")
 
 
-def imitation_goal(
-    state: HumanoidState, ref_next: HumanoidState, kind: Literal["rot", "keypoint"] = "rot", sixd: SixD = "zhou"
-) -> Tensor:
+def imitation_goal(state: HumanoidState, ref_next: HumanoidState, kind: Literal["rot", "keypoint"] = "rot", sixd: SixD = "zhou") -> Tensor:
     """:func:`imitation_goal_rot` or :func:`imitation_goal_keypoint` by ``kind``."""
     if kind == "rot":
         return imitation_goal_rot(state, ref_next, sixd)

@@ -285,8 +285,7 @@ def run_dir_lock(out_dir: Path) -> Iterator[None]:
             fh.seek(0)
             holder = fh.read().strip() or "unknown"
             raise StageFailed(
-                f"{out_dir}: another mocap run (pid {holder}) is writing to this run directory; wait for it to finish, "
-                "or choose another --out"
+                f"{out_dir}: another mocap run (pid {holder}) is writing to this run directory; wait for it to finish, or choose another --out"
             ) from None
         try:
             fh.seek(0)
@@ -318,9 +317,7 @@ def _as_trainer(trainer: Any, name: str) -> Trainer:
     return trainer
 
 
-def _run_pipeline_locked(
-    resolved: ResolvedSpec, plugins: PluginSet, out_dir: Path, store: Path, console: Console, main: bool
-) -> list[StageRecord]:
+def _run_pipeline_locked(resolved: ResolvedSpec, plugins: PluginSet, out_dir: Path, store: Path, console: Console, main: bool) -> list[StageRecord]:
     spec = resolved.spec
     if main:
         atomic_write_text(out_dir / "spec.yaml", resolved.to_yaml())

@@ -341,9 +341,7 @@ def _collect(pset: PluginSet) -> None:
                 impl.function(register=register)
             except Exception as exc:  # noqa: BLE001
                 failed.add(impl.plugin_name)
-                pset.failures.append(
-                    PluginFailure(impl.plugin_name, _package_of(pset, impl.plugin_name), f"in {hook_name}: {_one_line(exc)}")
-                )
+                pset.failures.append(PluginFailure(impl.plugin_name, _package_of(pset, impl.plugin_name), f"in {hook_name}: {_one_line(exc)}"))
                 continue
             for comp in registered:
                 existing = pset.components[kind].get(comp.name)

@@ -86,9 +86,7 @@ def render_report(
         trainer = section.trainer.name if getattr(section, "trainer", None) is not None else "-"
         trained = r.trained_seconds if r.reused else (r.seconds if trainer != "-" else None)
         shown = f"{trained:.1f} s" if trained is not None else "-"
-        lines.append(
-            f"| {r.stage} | {component} | {trainer} | `{r.workdir.name}` | {'yes' if r.reused else 'no'} | {r.seconds:.1f} | {shown} |"
-        )
+        lines.append(f"| {r.stage} | {component} | {trainer} | `{r.workdir.name}` | {'yes' if r.reused else 'no'} | {r.seconds:.1f} | {shown} |")
     for r in records:
         if not r.result.metrics:
             continue
@@ -257,9 +255,7 @@ def seed_band(series: Sequence[tuple[Sequence[float], Sequence[float]]]) -> tupl
     return grid.tolist(), ys.mean(0).tolist(), ys.std(0).tolist()
 
 
-def write_comparison_plots(
-    groups: dict[str, list[Path]], summary: dict[str, dict[str, MetricSummary]], metrics: Sequence[str], out_dir: Path
-) -> list[Path]:
+def write_comparison_plots(groups: dict[str, list[Path]], summary: dict[str, dict[str, MetricSummary]], metrics: Sequence[str], out_dir: Path) -> list[Path]:
     """``comparison_curves.png`` (per group: mean ± std over its cells' seeds of every learning
     curve) and ``comparison_final.png`` (``metrics`` of ``summary`` as bars with std error bars).
 

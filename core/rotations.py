@@ -228,11 +228,7 @@ def matrix_to_quat(m: Tensor) -> Tensor:
     m20, m21, m22 = m[..., 2, 0], m[..., 2, 1], m[..., 2, 2]
     tr = m00 + m11 + m22
     # 2 * (the large component) for each branch; clamped so that unused branches stay finite
-    r = torch.sqrt(
-        torch.stack((1.0 + tr, 1.0 + m00 - m11 - m22, 1.0 - m00 + m11 - m22, 1.0 - m00 - m11 + m22), dim=-1).clamp_min(
-            1e-12
-        )
-    )
+    r = torch.sqrt(torch.stack((1.0 + tr, 1.0 + m00 - m11 - m22, 1.0 - m00 + m11 - m22, 1.0 - m00 - m11 + m22), dim=-1).clamp_min(1e-12))
     cands = torch.stack(
         (
             torch.stack((r[..., 0] * r[..., 0], m21 - m12, m02 - m20, m10 - m01), dim=-1),

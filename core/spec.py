@@ -49,9 +49,7 @@ class StageSpec(ComponentRef):
     """A pipeline stage: the component it produces, the trainer that trains it, or a checkpoint."""
 
     trainer: ComponentRef | None = Field(default=None, description="trainer that produces this stage's artifact")
-    checkpoint: Path | None = Field(
-        default=None, description="use this existing checkpoint instead of training (relative to the spec file)"
-    )
+    checkpoint: Path | None = Field(default=None, description="use this existing checkpoint instead of training (relative to the spec file)")
 
 
 class EvalSpec(_Strict):
@@ -73,9 +71,7 @@ class Spec(_Strict):
     description: str = ""
     seed: int = Field(default=0, description="global seed; each stage derives its own from it")
     device: Literal["auto", "cpu", "cuda"] = Field(default="auto", description="torch device for networks")
-    torch_threads: ThreadCount | None = Field(
-        default=None, description="torch intra-op threads (None: leave the cores to the simulator threads)"
-    )
+    torch_threads: ThreadCount | None = Field(default=None, description="torch intra-op threads (None: leave the cores to the simulator threads)")
     humanoid: ComponentRef = Field(default_factory=lambda: ComponentRef(name="amp"))
     motions: ComponentRef = Field(default_factory=lambda: ComponentRef(name="deepmimic"))
     simulator: ComponentRef = Field(default_factory=lambda: ComponentRef(name="mujoco"))
@@ -195,9 +191,7 @@ class _SpecLoader(yaml.SafeLoader):
         self._depth += 1
         try:
             if self._depth > MAX_SPEC_DEPTH:
-                raise yaml.constructor.ConstructorError(
-                    None, None, f"nested more than {MAX_SPEC_DEPTH} levels deep", self.peek_event().start_mark
-                )
+                raise yaml.constructor.ConstructorError(None, None, f"nested more than {MAX_SPEC_DEPTH} levels deep", self.peek_event().start_mark)
             return super().compose_node(parent, index)
         finally:
             self._depth -= 1
@@ -215,9 +209,7 @@ class _SpecLoader(yaml.SafeLoader):
                 except TypeError:  # an unhashable key: SafeLoader reports it
                     continue
                 if dup:
-                    raise yaml.constructor.ConstructorError(
-                        "while reading a mapping", node.start_mark, f"duplicate key {key!r}", key_node.start_mark
-                    )
+                    raise yaml.constructor.ConstructorError("while reading a mapping", node.start_mark, f"duplicate key {key!r}", key_node.start_mark)
         return super().construct_mapping(node, deep=deep)
 
 
@@ -443,9 +435,7 @@ def resolve_relative_paths(model: BaseModel, base_dir: Path) -> BaseModel:
     return fix(model)
 
 
-def validate_document(
-    doc: dict[str, Any], plugins: PluginSet, source: str = "<spec>", base_dir: Path | None = None, provenance: Any = None
-) -> ResolvedSpec:
+def validate_document(doc: dict[str, Any], plugins: PluginSet, source: str = "<spec>", base_dir: Path | None = None, provenance: Any = None) -> ResolvedSpec:
     """Validate a merged mapping against the structure and every component's params model.
 
     Relative paths inside component params are resolved against ``base_dir`` (default: cwd).
@@ -546,7 +536,9 @@ def json_schema(plugins: PluginSet) -> dict[str, Any]:
     for role, kind in ROLE_KINDS.items():
         variants = one_of(kind)
         if variants:
-            props[role] = {"allOf": [props[role], variants]} if "anyOf" not in props[role] else {
-                "anyOf": [{"allOf": [{"$ref": "#/$defs/StageSpec"}, variants]}, {"type": "null"}]
-            }
+            props[role] = (
+                {"allOf": [props[role], variants]}
+                if "anyOf" not in props[role]
+                else {"anyOf": [{"allOf": [{"$ref": "#/$defs/StageSpec"}, variants]}, {"type": "null"}]}
+            )
     return schema

@@ -67,9 +67,7 @@ def motion_fingerprint(resolved: ResolvedSpec, plugins: PluginSet) -> str | None
     except (UnknownComponent, MotionDataError, OSError, ValueError):
         return None
     if not isinstance(source, MotionSource):
-        raise PluginError(
-            f"motion source {spec.motions.name!r} built a {type(source).__name__}, not a mocap.interfaces.MotionSource"
-        )
+        raise PluginError(f"motion source {spec.motions.name!r} built a {type(source).__name__}, not a mocap.interfaces.MotionSource")
     try:
         return files_fingerprint(source.inputs())
     except (MotionDataError, OSError, ValueError):

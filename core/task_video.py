@@ -36,9 +36,7 @@ def task_stage(run_dir: Path) -> dict[str, Any] | None:
     return next((s for s in stages if isinstance(s, dict) and s.get("stage") == "task"), None)
 
 
-def render_task(
-    run_dir: Path, out: Path, *, seconds: float = 10.0, seed: int | None = None, width: int = 640, height: int = 480
-) -> tuple[Path, str]:
+def render_task(run_dir: Path, out: Path, *, seconds: float = 10.0, seed: int | None = None, width: int = 640, height: int = 480) -> tuple[Path, str]:
     """Record the task policy of ``run_dir`` for ``seconds`` into ``out`` (module docstring)."""
     from mocap.errors import UserError
     from mocap.task_env import make_task_env

@@ -14,10 +14,7 @@ def tc():
 
 
 def _rows(n: int, offset: float = 0.0) -> list[dict]:
-    return [
-        {"stage": "task", "env_steps": 100.0 * (i + 1), "time": float(i), "episode/normalized_return": offset + i / n, "eval/x": 2.0 * i}
-        for i in range(n)
-    ]
+    return [{"stage": "task", "env_steps": 100.0 * (i + 1), "time": float(i), "episode/normalized_return": offset + i / n, "eval/x": 2.0 * i} for i in range(n)]
 
 
 def test_summarize_bins_and_final_values(tc):

@@ -75,9 +75,7 @@ def test_commands_given_a_crafted_checkpoint_never_run_it(tmp_path, capsys, argv
 def test_a_spec_naming_a_crafted_checkpoint_never_runs_it(tmp_path, capsys):
     path, marker = _evil(tmp_path)
     spec = tmp_path / "spec.yaml"
-    spec.write_text(
-        f"extends: {REPO / 'specs/imitator/amp_bundled.yaml'}\nname: evil\nimitator:\n  checkpoint: {path}\n  trainer: null\n"
-    )
+    spec.write_text(f"extends: {REPO / 'specs/imitator/amp_bundled.yaml'}\nname: evil\nimitator:\n  checkpoint: {path}\n  trainer: null\n")
     rc = main(["eval", str(spec)])
     assert rc == 2 and not marker.exists()
     assert "refused" in capsys.readouterr().err

@@ -57,9 +57,7 @@ def test_validate_yaml_syntax_error_shows_line_and_column(toy_plugins, spec_file
 
 
 def test_validate_nested_param_type_error(toy_plugins, spec_file):
-    assert_clean_error(
-        invoke(["validate", spec_file, "--set", "imitator.params.optim.lr=fast"]), "imitator.params.optim.lr", "'fast'"
-    )
+    assert_clean_error(invoke(["validate", spec_file, "--set", "imitator.params.optim.lr=fast"]), "imitator.params.optim.lr", "'fast'")
 
 
 def test_validate_missing_file(toy_plugins, tmp_path):
@@ -71,10 +69,10 @@ def test_schema_types_component_params(toy_plugins):
     assert result.exit_code == 0, result.output
     schema = json.loads(result.stdout)
     text = json.dumps(schema["properties"]["latent"])
-    assert "\"const\": \"toy_latent\"" in text and "ToyModelParams" in text and "Optim" in schema["$defs"]
+    assert '"const": "toy_latent"' in text and "ToyModelParams" in text and "Optim" in schema["$defs"]
     # a stage's trainer params are typed by the registered trainers (they were a free-form mapping)
     trainer = json.dumps(schema["$defs"]["StageSpec"]["properties"]["trainer"])
-    assert "\"const\": \"count\"" in trainer and "CountParams" in json.dumps(schema) and "\"null\"" in trainer
+    assert '"const": "count"' in trainer and "CountParams" in json.dumps(schema) and '"null"' in trainer
 
 
 def test_run_and_rerun_reuses(toy_plugins, spec_file, tmp_path):

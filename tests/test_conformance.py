@@ -84,9 +84,7 @@ def test_builtin_latent_spaces_keep_the_contract():
     small = {"encoder_hidden": [8], "prior_hidden": [8], "decoder_hidden": [8], "proprio_dim": P, "goal_dim": G, "action_dim": A}
     pulse = PulseLatent(PulseParams(latent_dim=3, **small), P, G, A)
     assert "random_action" in check_latent_space(pulse, _obs(6, P, G), A)
-    hybrid = HybridLatent(
-        HybridParams.model_validate({"latent_dim": 4, "num_codebooks": 2, "codebook_size": 6, "single_codebook_size": 12, **small}), P, G, A
-    )
+    hybrid = HybridLatent(HybridParams.model_validate({"latent_dim": 4, "num_codebooks": 2, "codebook_size": 6, "single_codebook_size": 12, **small}), P, G, A)
     assert "task action space MultiDiscrete" in check_latent_space(hybrid, _obs(6, P, G), A)
 
 

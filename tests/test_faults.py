@@ -23,9 +23,7 @@ def _model_and_opt():
 
 
 def _snapshot(model, opt):
-    return [p.detach().clone() for p in model.parameters()], json.dumps(
-        {k: str(v) for k, v in opt.state_dict()["state"].items()}
-    )
+    return [p.detach().clone() for p in model.parameters()], json.dumps({k: str(v) for k, v in opt.state_dict()["state"].items()})
 
 
 @pytest.mark.parametrize("poison", ["loss", "grad"])

@@ -199,8 +199,16 @@ def test_hybrid_random_action_shapes(amp):
 
     for variant in ("hybrid", "continuous", "discrete"):
         latent = make_hybrid(
-            HybridParams(variant=variant, latent_dim=4, num_codebooks=2, codebook_size=8, single_codebook_size=8,
-                         encoder_hidden=[8], prior_hidden=[8], decoder_hidden=[8]),
+            HybridParams(
+                variant=variant,
+                latent_dim=4,
+                num_codebooks=2,
+                codebook_size=8,
+                single_codebook_size=8,
+                encoder_hidden=[8],
+                prior_hidden=[8],
+                decoder_hidden=[8],
+            ),
             skeleton=amp,
         )
         obs = Observations(proprio=torch.randn(3, latent.proprio_dim), goal=None, extra={})

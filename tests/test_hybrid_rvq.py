@@ -408,9 +408,7 @@ def test_student_action_leaves_codebooks_untouched() -> None:
 def test_gaussian_kl_matches_torch(mu_q, ls_q, mu_p, ls_p) -> None:  # type: ignore[no-untyped-def]
     t = lambda v: torch.tensor([v], dtype=torch.float64)
     kl = gaussian_kl(t(mu_q), t(ls_q), t(mu_p), t(ls_p))
-    ref = torch.distributions.kl_divergence(
-        torch.distributions.Normal(t(mu_q), t(ls_q).exp()), torch.distributions.Normal(t(mu_p), t(ls_p).exp())
-    )
+    ref = torch.distributions.kl_divergence(torch.distributions.Normal(t(mu_q), t(ls_q).exp()), torch.distributions.Normal(t(mu_p), t(ls_p).exp()))
     torch.testing.assert_close(kl, ref)
     assert float(kl) >= -1e-12
     assert float(gaussian_kl(t(mu_q), t(ls_q), t(mu_q), t(ls_q))) == pytest.approx(0.0, abs=1e-12)

@@ -45,11 +45,7 @@ unit_vectors = (
     .filter(lambda v: math.sqrt(sum(c * c for c in v)) > 0.2)
     .map(lambda v: tuple(c / math.sqrt(sum(x * x for x in v)) for c in v))
 )
-unit_quats = (
-    st.tuples(*[st.floats(-1.0, 1.0)] * 4)
-    .filter(lambda q: math.sqrt(sum(c * c for c in q)) > 0.2)
-    .map(lambda q: np.asarray(q) / np.linalg.norm(q))
-)
+unit_quats = st.tuples(*[st.floats(-1.0, 1.0)] * 4).filter(lambda q: math.sqrt(sum(c * c for c in q)) > 0.2).map(lambda q: np.asarray(q) / np.linalg.norm(q))
 
 
 def _orthonormal_axes(q: np.ndarray, flip: bool) -> np.ndarray:

@@ -36,7 +36,7 @@ def _cli(*args: str) -> tuple[dict, str]:
     proc = subprocess.run([sys.executable, "-c", PROBE, *args], cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     line = [ln for ln in proc.stdout.splitlines() if ln.startswith("PROBE ")][-1]
-    return json.loads(line[len("PROBE "):]), proc.stdout + proc.stderr
+    return json.loads(line[len("PROBE ") :]), proc.stdout + proc.stderr
 
 
 @pytest.mark.parametrize(

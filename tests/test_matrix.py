@@ -13,13 +13,16 @@ from mocap.matrix import expand, load_cells
 from mocap.spec import SpecError
 from mocap.testing import invoke, use_plugins
 
-MATRIX = TOY_SPEC + """\
+MATRIX = (
+    TOY_SPEC
+    + """\
 matrix:
   latent:
     - {name: toy_latent, trainer: {name: count, params: {iterations: 2}}}
     - {name: toy_latent_b, trainer: {name: count, params: {iterations: 4}}}
   seed: [0, 1]
 """
+)
 
 
 def test_expand_is_the_cartesian_product_with_readable_names(tmp_path):

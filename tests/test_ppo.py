@@ -412,8 +412,6 @@ def test_ppo_learns_multi_discrete_point_env(tmp_path: Path):
     assert returns[-1] > returns[0] + 5 and returns[-1] > -5, (returns[0], returns[-1])
 
 
-
-
 def test_resume_with_a_constant_schedule_uses_the_specs_rate(tmp_path: Path):
     """A run trained with the adaptive rule, continued with ``lr_schedule: constant``: the optimizer
     runs at the spec's lr, not at the adapted rate saved in the checkpoint."""
@@ -429,9 +427,7 @@ def test_resume_with_a_constant_schedule_uses_the_specs_rate(tmp_path: Path):
 
 @pytest.mark.parametrize("schedule", ["constant", "adaptive"])
 def test_resume_is_bit_exact(tmp_path: Path, schedule: str):
-    params = small_params(
-        total_env_steps=32 * 32 * 4, checkpoint_every=3, bounds_coef=1.0, soft_bound=0.5, lr_schedule=schedule, desired_kl=1e-4
-    )
+    params = small_params(total_env_steps=32 * 32 * 4, checkpoint_every=3, bounds_coef=1.0, soft_bound=0.5, lr_schedule=schedule, desired_kl=1e-4)
     _train(tmp_path / "straight", params)
     straight = load_checkpoint(tmp_path / "straight" / "ppo.pt")
 

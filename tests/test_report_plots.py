@@ -27,8 +27,18 @@ def _write_metrics(path: Path, seed: float = 0.0, steps: int = 6, step_size: int
     path.parent.mkdir(parents=True, exist_ok=True)
     lines = []
     for i in range(1, steps + 1):
-        lines.append({"stage": "imitator", "step": i, "time": 0.0, "env_steps": float(i * step_size),
-                      "episode/return": i + seed, "episode/success": min(1.0, 0.1 * i), "loss/total": 1.0 / i, "lr": 3e-4})
+        lines.append(
+            {
+                "stage": "imitator",
+                "step": i,
+                "time": 0.0,
+                "env_steps": float(i * step_size),
+                "episode/return": i + seed,
+                "episode/success": min(1.0, 0.1 * i),
+                "loss/total": 1.0 / i,
+                "lr": 3e-4,
+            }
+        )
     for i in range(1, 4):
         lines.append({"stage": "latent", "step": i, "time": 0.0, "env_steps": float(i * 50), "loss/total": 2.0 / i + seed})
     lines.append({"stage": "eval", "step": 0, "time": 0.0, "success_rate": 0.5 + 0.1 * seed})

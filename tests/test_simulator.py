@@ -146,7 +146,17 @@ def test_reset_subset_leaves_other_envs_bit_identical(amp, library):
     for _ in range(10):
         sa, sb = a.step(targets), b.step(targets)
     for name in (
-        "root_pos", "root_rot", "body_pos", "body_rot", "body_lin_vel", "body_ang_vel", "dof_pos", "dof_vel", "contact_forces", "body_contact", "dof_force"
+        "root_pos",
+        "root_rot",
+        "body_pos",
+        "body_rot",
+        "body_lin_vel",
+        "body_ang_vel",
+        "dof_pos",
+        "dof_vel",
+        "contact_forces",
+        "body_contact",
+        "dof_force",
     ):
         assert torch.equal(getattr(sa, name)[keep], getattr(sb, name)[keep]), name
     assert not torch.equal(sa.body_pos[sub], sb.body_pos[sub])

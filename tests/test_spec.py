@@ -82,9 +82,7 @@ def test_set_parses_lists_and_null_and_indexes_lists():
 
 def test_extends_merges_and_replaces_renamed_components(tmp_path: Path):
     (tmp_path / "base.yaml").write_text(TOY_SPEC)
-    (tmp_path / "child.yaml").write_text(
-        "extends: base.yaml\nname: child\nimitator: {params: {hidden: 64}}\nlatent: {name: toy_latent_b}\n"
-    )
+    (tmp_path / "child.yaml").write_text("extends: base.yaml\nname: child\nimitator: {params: {hidden: 64}}\nlatent: {name: toy_latent_b}\n")
     resolved = load_spec(tmp_path / "child.yaml", PSET)
     spec = resolved.spec
     assert spec.name == "child"

@@ -67,12 +67,12 @@ def test_speed_and_reach_markers(amp):
     speed.prev_root_pos[1] = torch.tensor([2.0, -1.0, 0.9], dtype=torch.float64)
     speed.target_dir[1] = torch.tensor([math.cos(0.7), math.sin(0.7)], dtype=torch.float64)
     speed.target_speed[1] = 3.0
-    (pos, rgba, radius), = speed.markers(1)
+    ((pos, rgba, radius),) = speed.markers(1)
     assert np.allclose(pos[:2], [2.0 + math.cos(0.7), -1.0 + math.sin(0.7)]) and len(rgba) == 4
     assert radius == pytest.approx(0.04 + 0.02 * 3.0)
     reach = make_reach(ReachParams(), skeleton=amp, num_envs=2)
     reach.target[0] = torch.tensor([0.3, 0.4, 1.2], dtype=torch.float64)
-    (pos, _, _), = reach.markers(0)
+    ((pos, _, _),) = reach.markers(0)
     assert np.allclose(pos, [0.3, 0.4, 1.2])
 
 

@@ -127,9 +127,7 @@ def test_plugin_registers_the_three_tasks(amp):
             assert isinstance(task, mocap_tasks.common.TaskBase)
             dims[name] = task.goal_dim
         with pytest.raises(ValidationError):
-            pset.get("task", "reach").build(
-                {"coefficent": 4.0}, skeleton=amp, num_envs=4
-            )
+            pset.get("task", "reach").build({"coefficent": 4.0}, skeleton=amp, num_envs=4)
     assert dims == {"speed": 3, "reach": 3, "strike": 15}
 
 
@@ -156,9 +154,7 @@ def test_params_are_documented_and_strict():
 # -------------------------------------------------------------------------------------- speed
 @SETTINGS
 @given(seed=seeds, v_star=st.floats(0.0, 5.0), angle=st.floats(-math.pi, math.pi))
-def test_speed_reward_bounded_and_maximal_exactly_at_the_target_velocity(
-    seed, v_star, angle
-):
+def test_speed_reward_bounded_and_maximal_exactly_at_the_target_velocity(seed, v_star, angle):
     rng = np.random.default_rng(seed)
     d = torch.tensor([[math.cos(angle), math.sin(angle)]], dtype=F64)
     vs = torch.tensor([v_star], dtype=F64)
@@ -171,9 +167,7 @@ def test_speed_reward_bounded_and_maximal_exactly_at_the_target_velocity(
     assert (r[off] < 1).all()
     # the formula: along-error weight 1, tangent weight 0.1, scale 0.25
     along, tangent = (v * d).sum(-1), v[:, 1] * d[0, 0] - v[:, 0] * d[0, 1]
-    assert torch.allclose(
-        r, torch.exp(-0.25 * ((v_star - along) ** 2 + 0.1 * tangent**2))
-    )
+    assert torch.allclose(r, torch.exp(-0.25 * ((v_star - along) ** 2 + 0.1 * tangent**2)))
 
 
 def test_speed_task_reward_uses_the_chosen_velocity(amp):
@@ -185,37 +179,27 @@ def test_speed_task_reward_uses_the_chosen_velocity(amp):
     )
     s0 = standing(2, B)
     task.reset(all_ids(2), s0)
-    s1 = replace(
-        s0, root_lin_vel=torch.tensor([[2.0, 0.0, 0.3], [0.0, 2.0, 0.0]], dtype=F64)
-    )
+    s1 = replace(s0, root_lin_vel=torch.tensor([[2.0, 0.0, 0.3], [0.0, 2.0, 0.0]], dtype=F64))
     r = task.reward(s1, torch.zeros(2, amp.num_dofs))
     assert r[0].item() == pytest.approx(1.0)
     assert r[1].item() == pytest.approx(math.exp(-0.25 * (4.0 + 0.1 * 4.0)))
     # [CODE] finite difference of the root position over dt (the step() hook stores the previous one)
     fd = make_speed(
-        SpeedParams(
-            direction="world_x", speed_range=(2.0, 2.0), velocity="finite_difference"
-        ),
+        SpeedParams(direction="world_x", speed_range=(2.0, 2.0), velocity="finite_difference"),
         skeleton=amp,
         num_envs=2,
     )
     fd.reset(all_ids(2), s0)
-    moved = replace(
-        s0, root_pos=s0.root_pos + torch.tensor([2.0 / 30.0, 0.0, 0.0], dtype=F64)
-    )
+    moved = replace(s0, root_pos=s0.root_pos + torch.tensor([2.0 / 30.0, 0.0, 0.0], dtype=F64))
     assert torch.allclose(fd.reward(moved, None), torch.ones(2, dtype=F64))
     fd.step(moved)
-    assert torch.allclose(
-        fd.reward(moved, None), torch.full((2,), math.exp(-0.25 * 4.0), dtype=F64)
-    )
+    assert torch.allclose(fd.reward(moved, None), torch.full((2,), math.exp(-0.25 * 4.0), dtype=F64))
 
 
 def test_speed_goals_direction_modes_and_periodic_change(amp):
     B = amp.num_bodies
     s = standing(3, B, yaw=0.7)
-    task = make_speed(
-        SpeedParams(change_steps=(3, 3), seed=1), skeleton=amp, num_envs=3
-    )
+    task = make_speed(SpeedParams(change_steps=(3, 3), seed=1), skeleton=amp, num_envs=3)
     task.reset(all_ids(3), s)
     assert torch.allclose(
         task.target_dir,
@@ -223,9 +207,7 @@ def test_speed_goals_direction_modes_and_periodic_change(amp):
     )
     # facing the target direction: the observed direction is +x of the heading frame
     obs = task.observe(s)
-    assert torch.allclose(
-        obs[:, :2], torch.tensor([1.0, 0.0], dtype=F64).expand(3, 2), atol=1e-9
-    )
+    assert torch.allclose(obs[:, :2], torch.tensor([1.0, 0.0], dtype=F64).expand(3, 2), atol=1e-9)
     assert torch.equal(obs[:, 2], task.target_speed)
     assert ((task.target_speed >= 0) & (task.target_speed <= 5)).all()
     first = task.target_speed.clone()
@@ -234,15 +216,11 @@ def test_speed_goals_direction_modes_and_periodic_change(amp):
     assert torch.equal(task.target_speed, first)
     task.step(s)
     assert not torch.equal(task.target_speed, first)  # resampled after exactly 3 steps
-    assert torch.allclose(
-        task.target_dir[:, 0], torch.full((3,), math.cos(0.7), dtype=F64)
-    )  # direction kept
+    assert torch.allclose(task.target_dir[:, 0], torch.full((3,), math.cos(0.7), dtype=F64))  # direction kept
     wx = make_speed(SpeedParams(direction="world_x"), skeleton=amp, num_envs=3)
     wx.reset(all_ids(3), s)
     assert torch.equal(wx.target_dir, torch.tensor([[1.0, 0.0]] * 3, dtype=F64))
-    rnd = make_speed(
-        SpeedParams(direction="random", change_steps=(1, 1)), skeleton=amp, num_envs=3
-    )
+    rnd = make_speed(SpeedParams(direction="random", change_steps=(1, 1)), skeleton=amp, num_envs=3)
     rnd.reset(all_ids(3), s)
     d0 = rnd.target_dir.clone()
     assert torch.allclose(d0.norm(dim=-1), torch.ones(3, dtype=F64))
@@ -286,9 +264,7 @@ def test_speed_metrics_on_hand_made_states(amp):
 )
 def test_speed_observation_is_heading_invariant(amp, seed, yaw, shift):
     s = random_state(np.random.default_rng(seed), 5, amp.num_bodies)
-    task = make_speed(
-        SpeedParams(direction="random", seed=seed % 1000), skeleton=amp, num_envs=5
-    )
+    task = make_speed(SpeedParams(direction="random", seed=seed % 1000), skeleton=amp, num_envs=5)
     task.reset(all_ids(5), s)
     obs = task.observe(s)
     s2 = yaw_world(s, yaw, torch.tensor(shift, dtype=F64))
@@ -298,9 +274,7 @@ def test_speed_observation_is_heading_invariant(amp, seed, yaw, shift):
     )  # fmt: skip
     assert torch.allclose(task.observe(s2), obs, atol=1e-9)
     # the reward is invariant too (root_lin_vel rotates with the world)
-    task2 = make_speed(
-        SpeedParams(direction="random", seed=seed % 1000), skeleton=amp, num_envs=5
-    )
+    task2 = make_speed(SpeedParams(direction="random", seed=seed % 1000), skeleton=amp, num_envs=5)
     task2.reset(all_ids(5), s)
     assert torch.allclose(task.reward(s2, None), task2.reward(s, None), atol=1e-9)
 
@@ -324,15 +298,10 @@ def test_reach_coefficient_switch_and_hand(amp, smpl):
     assert ReachParams().coefficient == 5.0  # [P]
     task = make_reach(ReachParams(coefficient=4.0), skeleton=amp, num_envs=1)
     assert amp.body_names[task.body_index] == "right_hand"
-    assert (
-        smpl.body_names[make_reach(ReachParams(), skeleton=smpl, num_envs=1).body_index]
-        == "R_Hand"
-    )
+    assert smpl.body_names[make_reach(ReachParams(), skeleton=smpl, num_envs=1).body_index] == "R_Hand"
     s = standing(1, amp.num_bodies)
     task.reset(all_ids(1), s)
-    task.target = s.body_pos[:, task.body_index] + torch.tensor(
-        [0.5, 0.0, 0.0], dtype=F64
-    )
+    task.target = s.body_pos[:, task.body_index] + torch.tensor([0.5, 0.0, 0.0], dtype=F64)
     assert task.reward(s, None).item() == pytest.approx(math.exp(-4.0 * 0.25))
     assert task.max_reward == 1.0
 
@@ -352,9 +321,7 @@ def test_reach_sampling_box_and_reproducibility(amp):
     assert (rel.abs() <= 1.0).all() and rel.abs().max() > 0.5
     assert ((a.target[:, 2] >= 0.2) & (a.target[:, 2] <= 2.0)).all()
     assert ((a.change_at >= 50) & (a.change_at < 100)).all()
-    c = make_reach(
-        p, skeleton=amp, num_envs=64, seed=8
-    )  # the factory seed overrides the params'
+    c = make_reach(p, skeleton=amp, num_envs=64, seed=8)  # the factory seed overrides the params'
     c.reset(all_ids(64), s)
     assert not torch.equal(a.target, c.target)
     # a partial reset with the full-batch state only touches those envs
@@ -386,9 +353,7 @@ def test_reach_observation_is_heading_invariant(amp, seed, yaw, shift):
 
 def test_reach_metrics_on_hand_made_states(amp):
     B = amp.num_bodies
-    task = make_reach(
-        ReachParams(change_steps=(3, 3), success_radius=0.1), skeleton=amp, num_envs=2
-    )
+    task = make_reach(ReachParams(change_steps=(3, 3), success_radius=0.1), skeleton=amp, num_envs=2)
     s = standing(2, B)
     task.reset(all_ids(2), s)
     h = task.body_index
@@ -428,7 +393,5 @@ def test_fall_termination(amp):
     root[2, 2] = 0.1
     s = replace(s, body_contact=contact, root_pos=root)
     assert task.terminated(s).tolist() == [False, True, True]
-    off = make_reach(
-        ReachParams(termination={"early_termination": False}), skeleton=amp, num_envs=3
-    )
+    off = make_reach(ReachParams(termination={"early_termination": False}), skeleton=amp, num_envs=3)
     assert not off.terminated(s).any()

@@ -119,9 +119,7 @@ def test_point_goal_reward_bounds_arrival_and_direction(seed, direction, radius)
 def test_point_goal_reward_value():
     r = point_goal_reward(torch.zeros(1, 2, dtype=F64), torch.tensor([[0.4, 3.0]], dtype=F64), torch.tensor([[2.0, 0.0]], dtype=F64))
     assert float(r[0]) == pytest.approx(0.7 * math.exp(-0.5 * 4) + 0.3 * math.exp(-(0.6**2)))
-    paper = point_goal_reward(
-        torch.zeros(1, 2, dtype=F64), torch.tensor([[0.4, 3.0]], dtype=F64), torch.tensor([[2.0, 0.0]], dtype=F64), direction="paper"
-    )
+    paper = point_goal_reward(torch.zeros(1, 2, dtype=F64), torch.tensor([[0.4, 3.0]], dtype=F64), torch.tensor([[2.0, 0.0]], dtype=F64), direction="paper")
     assert float(paper[0]) == pytest.approx(0.7 * math.exp(-0.5 * 4) + 0.3 * math.exp(-(1.4**2)))
 
 
@@ -395,9 +393,7 @@ def _smoke(tmp_path: Path, make_env):
 
 
 TASKS = {
-    "terrain": lambda amp: make_terrain(
-        TerrainTaskParams(terrain={"kind": "rough", "size": 4.0}, map_shape=(4, 4), episode_steps=6), skeleton=amp, num_envs=2
-    ),
+    "terrain": lambda amp: make_terrain(TerrainTaskParams(terrain={"kind": "rough", "size": 4.0}, map_shape=(4, 4), episode_steps=6), skeleton=amp, num_envs=2),
     "point_goal": lambda amp: make_point_goal(PointGoalParams(episode_steps=6, change_steps=3), skeleton=amp, num_envs=2),
     "inbetween": lambda amp: make_inbetween(InbetweenParams(sequence_steps=6, num_keyframes=3), skeleton=amp, num_envs=2),
     "generation": lambda amp: make_generation(GenerationTaskParams(episode_steps=6, diversity_stride=2), skeleton=amp, num_envs=2),

@@ -67,9 +67,7 @@ class FakeSim:
 
 # ------------------------------------------------------------------------------------- strike
 def upright_rot(n: int, yaw: torch.Tensor | float = 0.0) -> torch.Tensor:
-    return quat_from_axis_angle(
-        Z.expand(n, 3), torch.as_tensor(yaw, dtype=F64).expand(n)
-    )
+    return quat_from_axis_angle(Z.expand(n, 3), torch.as_tensor(yaw, dtype=F64).expand(n))
 
 
 @SETTINGS
@@ -105,16 +103,12 @@ def test_strike_code_reward_values():
         torch.full((4,), 0.5, dtype=F64),
     )
     r2 = strike_reward_code(tar, tilted, root, vel)
-    assert torch.allclose(
-        r2 - r, torch.full((4,), 0.6 * (1 - math.cos(0.5)), dtype=F64)
-    )
+    assert torch.allclose(r2 - r, torch.full((4,), 0.6 * (1 - math.cos(0.5)), dtype=F64))
     lying = quat_from_axis_angle(
         torch.tensor([1.0, 0.0, 0.0], dtype=F64).expand(4, 3),
         torch.full((4,), math.pi / 2, dtype=F64),
     )
-    assert torch.allclose(
-        strike_reward_code(tar, lying, root, vel), torch.ones(4, dtype=F64)
-    )
+    assert torch.allclose(strike_reward_code(tar, lying, root, vel), torch.ones(4, dtype=F64))
     assert torch.allclose(strike_reward_paper(lying), torch.ones(4, dtype=F64))
     assert torch.allclose(strike_reward_paper(up), torch.zeros(4, dtype=F64))
 
@@ -138,27 +132,15 @@ def test_strike_reset_places_the_box_reproducibly(amp):
     task2, sim2 = make_strike_fake(amp, 256, seed=4)
     task2.reset(all_ids(256), s)
     assert torch.equal(sim.pos, sim2.pos) and torch.equal(sim.rot, sim2.rot)
-    code, simc = make_strike_fake(
-        amp, 256, distance=(0.5, 10.0), near_prob=0.5
-    )  # [CODE]
+    code, simc = make_strike_fake(amp, 256, distance=(0.5, 10.0), near_prob=0.5)  # [CODE]
     code.reset(all_ids(256), s)
     dc = (simc.pos[:, :2] - torch.tensor([1.0, 2.0], dtype=F64)).norm(dim=-1)
-    assert ((dc >= 0.5) & (dc <= 10.0)).all() and 0.3 < float(
-        (dc <= 1.5).double().mean()
-    ) < 0.8
+    assert ((dc >= 0.5) & (dc <= 10.0)).all() and 0.3 < float((dc <= 1.5).double().mean()) < 0.8
     assert task.sim_overrides["target"]["half_size"] == (0.2, 0.2, 0.9)
     assert task.sim_overrides["target"]["mass"] == pytest.approx(0.4 * 0.4 * 1.8 * 30.0)
-    assert (
-        task.max_reward == 1.0
-        and make_strike(
-            StrikeParams(reward="paper"), skeleton=amp, num_envs=1
-        ).max_reward
-        == 2.0
-    )
+    assert task.max_reward == 1.0 and make_strike(StrikeParams(reward="paper"), skeleton=amp, num_envs=1).max_reward == 2.0
     with pytest.raises(RuntimeError, match="attach"):
-        make_strike(StrikeParams(), skeleton=amp, num_envs=1).reset(
-            all_ids(1), standing(1, amp.num_bodies)
-        )
+        make_strike(StrikeParams(), skeleton=amp, num_envs=1).reset(all_ids(1), standing(1, amp.num_bodies))
 
 
 @SETTINGS
@@ -190,34 +172,23 @@ def test_strike_observation_layout(amp):
     task, sim = make_strike_fake(amp, 1, random_yaw=False)
     s = standing(1, amp.num_bodies, yaw=math.pi / 2, xy=(1.0, 1.0))
     task.reset(all_ids(1), s)
-    sim.pos[:] = torch.tensor(
-        [1.0, 3.0, 0.9], dtype=F64
-    )  # 2 m straight ahead of the humanoid
+    sim.pos[:] = torch.tensor([1.0, 3.0, 0.9], dtype=F64)  # 2 m straight ahead of the humanoid
     sim.lin_vel[:] = torch.tensor([0.0, 1.0, 0.0], dtype=F64)
     obs = task.observe(s)[0]
     assert torch.allclose(obs[:3], torch.tensor([2.0, 0.0, 0.9], dtype=F64), atol=1e-9)
     # tan_norm of a box turned by -90 deg relative to the heading: x axis -> -y, z axis up
-    assert torch.allclose(
-        obs[3:9], torch.tensor([0.0, -1.0, 0.0, 0.0, 0.0, 1.0], dtype=F64), atol=1e-9
-    )
-    assert torch.allclose(
-        obs[9:12], torch.tensor([1.0, 0.0, 0.0], dtype=F64), atol=1e-9
-    )
+    assert torch.allclose(obs[3:9], torch.tensor([0.0, -1.0, 0.0, 0.0, 0.0, 1.0], dtype=F64), atol=1e-9)
+    assert torch.allclose(obs[9:12], torch.tensor([1.0, 0.0, 0.0], dtype=F64), atol=1e-9)
 
 
 def test_strike_termination_rules(amp):
     B = amp.num_bodies
-    hand, lower, foot, torso = (
-        amp.body_index(x)
-        for x in ("right_hand", "right_lower_arm", "left_foot", "torso")
-    )
+    hand, lower, foot, torso = (amp.body_index(x) for x in ("right_hand", "right_lower_arm", "left_foot", "torso"))
     s = standing(4, B)
     contact = torch.zeros(4, B, dtype=torch.bool)
     forces = torch.zeros(4, B, 3, dtype=F64)
     contact[0, hand] = True  # env 0: the hand hits the box: allowed
-    contact[1, lower] = (
-        True  # env 1: the forearm hits it (allowed by the code's strike bodies)
-    )
+    contact[1, lower] = True  # env 1: the forearm hits it (allowed by the code's strike bodies)
     forces[1, lower, 0] = 80.0
     contact[2, foot] = True  # env 2: a kick (feet are exempt in the code's rule)
     forces[2, foot, 0] = 80.0
@@ -226,9 +197,7 @@ def test_strike_termination_rules(amp):
     s = replace(s, body_contact=contact, contact_forces=forces)
     paper, sim = make_strike_fake(amp, 4)
     assert paper.terminated(s).tolist() == [False, True, True, True]
-    code, _ = make_strike_fake(
-        amp, 4, illegal_contact="code", strike_bodies=("right_hand", "right_lower_arm")
-    )
+    code, _ = make_strike_fake(amp, 4, illegal_contact="code", strike_bodies=("right_hand", "right_lower_arm"))
     code.attach(sim)
     assert code.terminated(s).tolist() == [False, False, False, False]
     forces[3, torso, 0] = 60.0
@@ -256,9 +225,7 @@ def test_strike_metrics_on_hand_made_states(amp):
     task, sim = make_strike_fake(amp, 2)
     s = standing(2, amp.num_bodies)
     task.reset(all_ids(2), s)
-    lying = quat_from_axis_angle(
-        torch.tensor([1.0, 0.0, 0.0], dtype=F64), torch.tensor(math.pi / 2, dtype=F64)
-    )
+    lying = quat_from_axis_angle(torch.tensor([1.0, 0.0, 0.0], dtype=F64), torch.tensor(math.pi / 2, dtype=F64))
     for t in range(4):
         if t == 2:
             sim.rot[0] = lying  # env 0's box is knocked over on the 3rd step

@@ -46,9 +46,7 @@ from mocap_tasks.tracking import (
 ROOT = Path(__file__).resolve().parents[1]
 F64 = torch.float64
 Z = torch.tensor([0.0, 0.0, 1.0], dtype=F64)
-SETTINGS = settings(
-    max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture]
-)
+SETTINGS = settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 seeds = st.integers(0, 2**32 - 1)
 TASKS = {
     "vr_tracking": (make_vr_tracking, VrTrackingParams),
@@ -66,12 +64,18 @@ def lib(amp):
 
 def as_sim(h, contact: torch.Tensor | None = None) -> SimState:
     """A reference frame as a float64 simulator state."""
-    f = {k: getattr(h, k).to(F64) for k in ("root_pos", "root_rot", "root_lin_vel", "root_ang_vel", "dof_pos",
-                                              "dof_vel", "body_pos", "body_rot", "body_lin_vel", "body_ang_vel")}
+    f = {
+        k: getattr(h, k).to(F64)
+        for k in ("root_pos", "root_rot", "root_lin_vel", "root_ang_vel", "dof_pos", "dof_vel", "body_pos", "body_rot", "body_lin_vel", "body_ang_vel")
+    }
     n, b = f["body_pos"].shape[:2]
-    return SimState(**f, contact_forces=torch.zeros(n, b, 3, dtype=F64),
-                    body_contact=torch.zeros(n, b, dtype=torch.bool) if contact is None else contact,
-                    unstable=torch.zeros(n, dtype=torch.bool), dof_force=torch.zeros(n, f["dof_pos"].shape[1], dtype=F64))
+    return SimState(
+        **f,
+        contact_forces=torch.zeros(n, b, 3, dtype=F64),
+        body_contact=torch.zeros(n, b, dtype=torch.bool) if contact is None else contact,
+        unstable=torch.zeros(n, dtype=torch.bool),
+        dof_force=torch.zeros(n, f["dof_pos"].shape[1], dtype=F64),
+    )
 
 
 def perturb(s: SimState, rng: np.random.Generator, scale: float = 0.1) -> SimState:
@@ -157,8 +161,12 @@ def test_params_are_documented_strict_and_switches_cite_paper_and_code():
         assert model.model_config.get("extra") == "forbid"
         for name, field in model.model_fields.items():
             assert field.description, f"{model.__name__}.{name} has no description"
-    for model, name in ((VrTrackingParams, "reward_form"), (VrTrackingParams, "termination"),
-                        (MotionTrackingParams, "reward_form"), (MotionTrackingParams, "termination")):
+    for model, name in (
+        (VrTrackingParams, "reward_form"),
+        (VrTrackingParams, "termination"),
+        (MotionTrackingParams, "reward_form"),
+        (MotionTrackingParams, "termination"),
+    ):
         d = model.model_fields[name].description
         assert "[P]" in d and "[CODE]" in d
     with pytest.raises(ValidationError):
@@ -214,8 +222,18 @@ def test_imitation_reward_paper_and_code_forms_by_hand():
     n, b = 1, 2
     zero = torch.zeros(n, b, 3, dtype=F64)
     ident = torch.tensor([1.0, 0, 0, 0], dtype=F64).expand(n, b, 4)
-    ref = SimState(torch.zeros(n, 3, dtype=F64), ident[:, 0], torch.zeros(n, 3, dtype=F64), torch.zeros(n, 3, dtype=F64),
-                   torch.zeros(n, 1, dtype=F64), torch.zeros(n, 1, dtype=F64), zero, ident, zero, zero)
+    ref = SimState(
+        torch.zeros(n, 3, dtype=F64),
+        ident[:, 0],
+        torch.zeros(n, 3, dtype=F64),
+        torch.zeros(n, 3, dtype=F64),
+        torch.zeros(n, 1, dtype=F64),
+        torch.zeros(n, 1, dtype=F64),
+        zero,
+        ident,
+        zero,
+        zero,
+    )
     pos = zero.clone()
     pos[0, 0] = torch.tensor([0.3, 0.0, 0.4])  # body 0 off by 0.5 m, body 1 exact
     sim = replace(ref, body_pos=pos)
@@ -515,22 +533,30 @@ def test_specs_for_every_task_and_latent_validate():
 
 # ----------------------------------------------------------------------------------- smoke
 SMOKE = [
-    "--set", "motions.params.clips=[walk]",
-    "--set", "task.trainer.params.num_envs=2",
-    "--set", "task.trainer.params.horizon=4",
-    "--set", "task.trainer.params.total_env_steps=16",
-    "--set", "task.trainer.params.minibatch_size=8",
-    "--set", "task.trainer.params.epochs=1",
-    "--set", "task.trainer.params.actor_hidden=[16]",
-    "--set", "task.trainer.params.critic_hidden=[16]",
-    "--set", "task.trainer.params.checkpoint_every=1",
+    "--set",
+    "motions.params.clips=[walk]",
+    "--set",
+    "task.trainer.params.num_envs=2",
+    "--set",
+    "task.trainer.params.horizon=4",
+    "--set",
+    "task.trainer.params.total_env_steps=16",
+    "--set",
+    "task.trainer.params.minibatch_size=8",
+    "--set",
+    "task.trainer.params.epochs=1",
+    "--set",
+    "task.trainer.params.actor_hidden=[16]",
+    "--set",
+    "task.trainer.params.critic_hidden=[16]",
+    "--set",
+    "task.trainer.params.checkpoint_every=1",
 ]
 
 
 @pytest.mark.parametrize(
     "spec",
-    ["vr_tracking_scratch", "vr_tracking_pulse", "hmd_tracking_scratch", "hmd_tracking_hybrid_rvq",
-     "motion_tracking_scratch", "motion_tracking_pulse"],
+    ["vr_tracking_scratch", "vr_tracking_pulse", "hmd_tracking_scratch", "hmd_tracking_hybrid_rvq", "motion_tracking_scratch", "motion_tracking_pulse"],
 )
 def test_ppo_iterations_through_the_pipeline(spec, tmp_path):
     from mocap.testing import invoke

@@ -32,10 +32,7 @@ def hinges(
     armature: float,
 ) -> tuple[Hinge, ...]:
     """Hinges ``{prefix}_{a}`` about the body axes named by ``order`` (e.g. ``"yxz"``), same gains."""
-    return tuple(
-        Hinge(f"{prefix}_{a}", AXES[a], ranges[a], kp=kp, kd=kd, torque_limit=torque_limit, armature=armature)
-        for a in order
-    )
+    return tuple(Hinge(f"{prefix}_{a}", AXES[a], ranges[a], kp=kp, kd=kd, torque_limit=torque_limit, armature=armature) for a in order)
 
 
 def rest_body_positions(skeleton: Skeleton) -> list[tuple[float, float, float]]:
@@ -82,9 +79,7 @@ def geom_volume(geom: Geom) -> float:
 def rest_root_height(skeleton: Skeleton, clearance: float = 0.0) -> float:
     """Root height at which the lowest geom of the rest pose sits ``clearance`` above z = 0."""
     positions = rest_body_positions(skeleton)
-    lowest = min(
-        positions[i][2] + geom_min_z(g) for i, body in enumerate(skeleton.bodies) for g in body.geoms
-    )
+    lowest = min(positions[i][2] + geom_min_z(g) for i, body in enumerate(skeleton.bodies) for g in body.geoms)
     return clearance - lowest
 
 

@@ -232,9 +232,7 @@ def smpl_skeleton(
         kind = _kind(name)
         kp, kd = GAINS[_GROUP[kind]]
         ranges = RANGES[name] if name in RANGES else RANGES[kind]
-        hs = hinges(
-            name, HINGE_ORDER, ranges, kp=kp * gain_scale, kd=kd * gain_scale, torque_limit=torque_limit, armature=armature
-        )
+        hs = hinges(name, HINGE_ORDER, ranges, kp=kp * gain_scale, kd=kd * gain_scale, torque_limit=torque_limit, armature=armature)
         bodies.append(Body(name, index[parent], offset, Joint("ball", hs), body_mass, geoms))
     skeleton = Skeleton(
         name="smpl",

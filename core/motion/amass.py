@@ -85,8 +85,7 @@ def body_map(skeleton: Skeleton, where: str = "amass") -> list[int]:
     missing = [n for n in SMPL_JOINT_NAMES if _key(n) not in index]
     if missing or index.get(_key(SMPL_JOINT_NAMES[0])) != 0:
         raise MotionDataError(
-            f"{where}: AMASS clips drive the 24 SMPL joints; skeleton {skeleton.name!r} lacks "
-            f"{', '.join(missing) or 'Pelvis as its root'}: use humanoid 'smpl'"
+            f"{where}: AMASS clips drive the 24 SMPL joints; skeleton {skeleton.name!r} lacks {', '.join(missing) or 'Pelvis as its root'}: use humanoid 'smpl'"
         )
     return [index[_key(n)] for n in SMPL_JOINT_NAMES]
 

@@ -34,15 +34,9 @@ motions_app = typer.Typer(
 )
 
 SourceOpt = Annotated[str, typer.Option("--source", help="registered motion source (deepmimic, amass, npz, ...)")]
-PathOpt = Annotated[
-    Optional[list[Path]], typer.Option("--path", "-p", help="file or folder for the source's 'paths' (repeatable)", show_default=False)
-]
-ClipOpt = Annotated[
-    Optional[list[str]], typer.Option("--clip", "-c", help="clip name for the source's 'clips' (repeatable)", show_default=False)
-]
-HumanoidOpt = Annotated[
-    Optional[str], typer.Option("--humanoid", help="humanoid to load onto (default: the source's own, e.g. amp for deepmimic)")
-]
+PathOpt = Annotated[Optional[list[Path]], typer.Option("--path", "-p", help="file or folder for the source's 'paths' (repeatable)", show_default=False)]
+ClipOpt = Annotated[Optional[list[str]], typer.Option("--clip", "-c", help="clip name for the source's 'clips' (repeatable)", show_default=False)]
+HumanoidOpt = Annotated[Optional[str], typer.Option("--humanoid", help="humanoid to load onto (default: the source's own, e.g. amp for deepmimic)")]
 JsonOpt = Annotated[bool, typer.Option("--json", help="machine-readable output")]
 
 

@@ -130,14 +130,10 @@ def check_skeleton(skeleton: Skeleton, where: str = "deepmimic") -> None:
             continue
         hinges = skeleton.bodies[skeleton.body_index(body)].joint.hinges
         if len(hinges) != 1:
-            raise MotionDataError(
-                f"{where}: DeepMimic's {body} joint is a single hinge but skeleton {skeleton.name!r} gives it {len(hinges)} DoF"
-            )
+            raise MotionDataError(f"{where}: DeepMimic's {body} joint is a single hinge but skeleton {skeleton.name!r} gives it {len(hinges)} DoF")
         axis = np.asarray(hinges[0].axis, dtype=np.float64)
         if abs(abs(float(axis @ HINGE_AXIS)) - np.linalg.norm(axis)) > 1e-6:
-            raise MotionDataError(
-                f"{where}: skeleton {skeleton.name!r} hinges {body} about {tuple(axis)}; DeepMimic's axis is (0, -1, 0) (z up)"
-            )
+            raise MotionDataError(f"{where}: skeleton {skeleton.name!r} hinges {body} about {tuple(axis)}; DeepMimic's axis is (0, -1, 0) (z up)")
 
 
 def _frame_rate(path: Path, durations: np.ndarray) -> tuple[float, bool]:
@@ -292,9 +288,7 @@ class DeepMimicSource(MotionSource):
             elif c in available:
                 out.append((self.data_dir / f"{FILE_PREFIX}{c}.txt", c))
             else:
-                raise MotionDataError(
-                    f"unknown DeepMimic clip {c!r} in {self.data_dir}; available: {', '.join(available) or '(none)'}"
-                )
+                raise MotionDataError(f"unknown DeepMimic clip {c!r} in {self.data_dir}; available: {', '.join(available) or '(none)'}")
         return out
 
     def inputs(self) -> list[Path]:

@@ -451,9 +451,7 @@ class MotionLibrary:
             body_rot = quat_slerp(self.body_rot[g0], self.body_rot[g1], alpha[:, None])
 
         if bool(torch.any(k != 0)):
-            body_pos, body_rot, body_lin_vel, body_ang_vel = self._apply_cycles(
-                c, k, body_pos, body_rot, body_lin_vel, body_ang_vel
-            )
+            body_pos, body_rot, body_lin_vel, body_ang_vel = self._apply_cycles(c, k, body_pos, body_rot, body_lin_vel, body_ang_vel)
         return MotionFrames(
             root_pos=body_pos[:, 0].clone(),
             root_rot=body_rot[:, 0].clone(),

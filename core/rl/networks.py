@@ -308,8 +308,7 @@ def init_from_policy(model: ActorCritic, source: Path, log_std: float | None = N
     if got != want:
         bad = sorted(k for k in set(got) | set(want) if got.get(k) != want.get(k))[:3]
         raise CheckpointError(
-            f"{source}: init_policy does not fit this network (observation {model.obs_dim}, actions "
-            f"{model.action_dim}); differing tensors: {', '.join(bad)}"
+            f"{source}: init_policy does not fit this network (observation {model.obs_dim}, actions {model.action_dim}); differing tensors: {', '.join(bad)}"
         )
     model.load_state_dict(src.state_dict())
     if log_std is not None:

@@ -21,14 +21,10 @@ class PPOParams(BaseModel):
 
     num_envs: EnvCount = Field(128, description="parallel envs (PHC: 1536)")
     horizon: int = Field(64, ge=1, description="steps per env per iteration; batch = num_envs × horizon (PHC: 32)")
-    max_consecutive_faults: int = Field(
-        10, ge=0, description="stop after this many consecutive batches with non-finite values (each is skipped); 0: only skip"
-    )
+    max_consecutive_faults: int = Field(10, ge=0, description="stop after this many consecutive batches with non-finite values (each is skipped); 0: only skip")
     total_env_steps: int = Field(10_000_000, ge=1, description="training budget in env steps (rounded up to whole iterations)")
     epochs: int = Field(4, ge=1, description="passes over each batch (PHC: 6 mini-epochs)")
-    minibatch_size: int = Field(
-        2048, ge=1, description="samples per gradient step; ≤ batch; a remainder is dropped each epoch (PHC: 16384)"
-    )
+    minibatch_size: int = Field(2048, ge=1, description="samples per gradient step; ≤ batch; a remainder is dropped each epoch (PHC: 16384)")
     lr: LearningRate = Field(3e-4, description="Adam learning rate (PHC: 2e-5)")
     lr_schedule: Literal["constant", "linear", "adaptive"] = Field(
         "constant",
@@ -47,8 +43,7 @@ class PPOParams(BaseModel):
     value_coef: float = Field(
         0.5,
         ge=0,
-        description="critic loss weight; with separate networks and Adam it matters mainly through the shared "
-        "grad-norm clip (PHC: 5)",
+        description="critic loss weight; with separate networks and Adam it matters mainly through the shared grad-norm clip (PHC: 5)",
     )
     entropy_coef: float = Field(0.0, ge=0, description="entropy bonus weight (PHC: 0)")
     bounds_coef: float = Field(0.0, ge=0, description="weight of the bound loss on the Gaussian mean (PHC: 10)")
@@ -59,8 +54,7 @@ class PPOParams(BaseModel):
     obs_clip: float = Field(5.0, gt=0, description="clip of normalized observations")
     normalize_value: bool = Field(
         False,
-        description="the critic regresses value targets standardized by their running mean/std (updated once per "
-        "batch; no PopArt output rescaling) (PHC: yes)",
+        description="the critic regresses value targets standardized by their running mean/std (updated once per batch; no PopArt output rescaling) (PHC: yes)",
     )
     actor_hidden: list[LayerWidth] = Field(default_factory=lambda: [512, 256], description="actor MLP hidden sizes (PHC: [1024, 512])")
     critic_hidden: list[LayerWidth] = Field(default_factory=lambda: [512, 256], description="critic MLP hidden sizes (PHC: [1024, 512])")
@@ -83,9 +77,7 @@ class PPOParams(BaseModel):
         description="start from this policy file's weights and normalizers instead of random ones (relative to the "
         "spec file; same architecture). Used only when the stage has no ppo.pt yet; the budget counts this stage's steps",
     )
-    init_log_std: LogStd | None = Field(
-        None, description="with init_policy: reset log σ to this value (e.g. a fixed σ); None keeps the policy's σ"
-    )
+    init_log_std: LogStd | None = Field(None, description="with init_policy: reset log σ to this value (e.g. a fixed σ); None keeps the policy's σ")
     init_lr: LearningRate | None = Field(
         1e-5,
         description="with init_policy: the learning rate of the first update (the 'adaptive' schedule moves on from it; "
@@ -99,9 +91,7 @@ class PPOParams(BaseModel):
     @model_validator(mode="after")
     def _minibatch_fits(self) -> "PPOParams":
         if self.minibatch_size > self.num_envs * self.horizon:
-            raise ValueError(
-                f"minibatch_size {self.minibatch_size} exceeds the batch num_envs × horizon = {self.num_envs * self.horizon}"
-            )
+            raise ValueError(f"minibatch_size {self.minibatch_size} exceeds the batch num_envs × horizon = {self.num_envs * self.horizon}")
         if self.init_log_std is not None and self.init_policy is None:
             raise ValueError("init_log_std needs init_policy (log_std_init sets the σ of a fresh network)")
         return self
@@ -120,7 +110,6 @@ class PPOParams(BaseModel):
     @property
     def iterations(self) -> int:
         return math.ceil(self.total_env_steps / self.batch_size)
-
 
 
 #: initial log σ when neither the spec nor the action space sets one

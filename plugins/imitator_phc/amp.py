@@ -255,8 +255,7 @@ def lsgan_loss(d_demo: Tensor, d_policy: Tensor) -> Tensor:
 def bce_loss(d_demo: Tensor, d_policy: Tensor) -> Tensor:
     """``0.5 (BCE(D_policy, 0) + BCE(D_demo, 1))`` on logits."""
     return 0.5 * (
-        F.binary_cross_entropy_with_logits(d_policy, torch.zeros_like(d_policy))
-        + F.binary_cross_entropy_with_logits(d_demo, torch.ones_like(d_demo))
+        F.binary_cross_entropy_with_logits(d_policy, torch.zeros_like(d_policy)) + F.binary_cross_entropy_with_logits(d_demo, torch.ones_like(d_demo))
     )
 
 

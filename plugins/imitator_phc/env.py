@@ -101,7 +101,7 @@ from mocap.imitation_rewards import ImitationReward, energy_penalty
 from mocap_phc.env_mining import ClipMining, PolicyFn
 from mocap_phc.observation import PHCObservation, PolicyImitator
 from mocap_phc.phc_params import REWARD_TERMS
-from mocap_phc.termination import DEFAULT_THRESHOLD, Termination, curriculum_threshold
+from mocap_phc.termination import DEFAULT_THRESHOLD, Termination, contact_table, curriculum_threshold
 
 if TYPE_CHECKING:  # pragma: no cover
     from mocap_phc.imitator import PHCParams
@@ -156,6 +156,9 @@ class ImitationEnv(ClipMining):
             p.fall_check,
             p.fall_height,
         )
+        # per-clip contact rules: (C, B) bodies whose ground contact ends an episode of that clip
+        cr = p.contact_rules
+        self._forbidden = contact_table(skeleton, library.clip_names, cr.allowed, cr.default).to(library.device) if cr is not None else None
         self._final_threshold = self.termination.threshold if self.termination.threshold is not None else DEFAULT_THRESHOLD[p.termination]
         if p.termination_curriculum is not None:
             self.termination = replace(self.termination, threshold=curriculum_threshold(p.termination_curriculum, self._final_threshold, 0))
@@ -172,7 +175,7 @@ class ImitationEnv(ClipMining):
         if p.control_grid:  # the reference at t0 + k dt becomes a table lookup (start times on the grid)
             lib.use_control_grid(self.dt, p.episode_steps + 2)
         ss = p.start_sampling
-        durations = lib.durations.to(dev, torch.float64)
+        durations = lib.durations64.to(dev)
         self.start_sampler = AdaptiveStartSampler(durations, ss) if ss.mode == "adaptive" else None
         self.starts = ReferenceStarts(lib, self.dt, control_grid=p.control_grid, start_sampler=self.start_sampler)
         self._ref_next: MotionFrames | None = None
@@ -367,7 +370,8 @@ class ImitationEnv(ClipMining):
         self._steps_seen += N
         if p.termination_curriculum is not None:  # loose to tight (PHCParams.termination_curriculum)
             self.termination = replace(self.termination, threshold=curriculum_threshold(p.termination_curriculum, self._final_threshold, self._steps_seen))
-        _, parts = self.termination(state, ref, self.book.steps)
+        forbidden = self._forbidden[self.clip_ids] if self._forbidden is not None else None
+        _, parts = self.termination(state, ref, self.book.steps, forbidden, p.contact_rules.fall_height if p.contact_rules is not None else None)
         terminated, term_info = self.termination_terms(parts)
         if p.fail_states is not None:  # a fallen or far start has a grace window to recover in
             grace = self.recovery_left > 0

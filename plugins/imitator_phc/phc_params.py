@@ -63,6 +63,24 @@ class TerminationCurriculum(BaseModel):
     env_steps: int = Field(5_000_000, ge=1, description="env steps over which the threshold reaches the rule's")
 
 
+class ContactRules(BaseModel):
+    """Which bodies of the humanoid may touch the ground, per clip; a contact by any other body ends
+    the episode (logged as ``terminated/fall``). Not in PHC, whose imitation never terminates on
+    contacts (only on the tracking distance); MimicKit's per-motion contact bodies do this, so that
+    a walking clip is not practised on the knees while a roll or a get-up may touch with anything.
+
+    A clip takes the body list of the first key of ``allowed`` its name matches (``fnmatch``
+    globs, in order); a clip that matches none takes ``default`` (None: the skeleton's feet). Body
+    lists are globs too; ``["*"]`` lets every body touch (never terminated by contact)."""
+
+    model_config = ConfigDict(extra="forbid")
+    allowed: dict[str, list[str]] = Field(
+        default_factory=dict, description="clip-name glob -> body-name globs allowed to touch the ground (first matching key wins)"
+    )
+    default: list[str] | None = Field(None, description="body-name globs of the clips no key matches; None: the skeleton's feet")
+    fall_height: float | None = Field(None, gt=0.0, description="only count contacts of bodies below this height, m (None: every contact)")
+
+
 class PHCParams(BaseModel):
     """Parameters of the PHC / PHC+ imitator ([P] paper value, [C] official code value)."""
 
@@ -126,6 +144,11 @@ class PHCParams(BaseModel):
     )
     fall_check: bool = Field(False, description="also terminate when a non-foot body touches the ground (not PHC imitation; ASE/AMP style)")
     fall_height: float | None = Field(None, gt=0.0, description="with fall_check: only count contacts of bodies below this height, m (ASE: 0.15)")
+    contact_rules: ContactRules | None = Field(
+        None,
+        description="per-clip bodies allowed to touch the ground; any other contact terminates (MimicKit-style; not PHC); "
+        "replaces fall_check's feet-only rule. None: no contact termination ([P]/[C] PHC)",
+    )
     # ------------------------------------------------------------------------------ action
     action: Literal["absolute", "residual"] = Field(
         "absolute",

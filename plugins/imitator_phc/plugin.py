@@ -58,9 +58,7 @@ def register_commands(app: Any) -> None:
         video_trial: Annotated[
             str, typer.Option("--video-trial", help="the trial --video shows: an index, or 'best' (the first to recover, else the closest)")
         ] = "0",
-        imitator_only: Annotated[
-            bool, typer.Option("--imitator-only", help="for a latent space: evaluate the imitator it was distilled from")
-        ] = False,
+        imitator_only: Annotated[bool, typer.Option("--imitator-only", help="for a latent space: evaluate the imitator it was distilled from")] = False,
     ) -> None:
         """Recovery rate: from fallen (and far) states, the share that gets up and back within 0.5 m of the reference."""
         import json
@@ -93,8 +91,14 @@ def register_commands(app: Any) -> None:
         with Progress(console=console, transient=True) as bar:
             task = bar.add_task("recovery rollouts", total=int(round(seconds * 30)))
             res = evaluate_recovery(
-                loaded.policy, loaded.library, loaded.make_sim, loaded.skeleton, params, recorder=recorder,
-                progress=lambda: bar.advance(task), video_trial=video_trial if video_trial == "best" else int(video_trial),
+                loaded.policy,
+                loaded.library,
+                loaded.make_sim,
+                loaded.skeleton,
+                params,
+                recorder=recorder,
+                progress=lambda: bar.advance(task),
+                video_trial=video_trial if video_trial == "best" else int(video_trial),
             )
         res["evaluated"] = str(target)
         if recorder is not None and video is not None:

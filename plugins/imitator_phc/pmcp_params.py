@@ -74,8 +74,7 @@ class RecoveryPhaseParams(BaseModel):
     )
     composer_fail_states: FailStateParams | None = Field(
         default_factory=_recovery_fail_default,
-        description="episode starts while training the composer ([P] 'fail-state recovery training is interleaved during "
-        "composer training'); None: RSI only",
+        description="episode starts while training the composer ([P] 'fail-state recovery training is interleaved during composer training'); None: RSI only",
     )
 
 
@@ -96,8 +95,7 @@ class PMCPParams(BaseModel):
     primitive_env_steps: int | None = Field(
         None,
         ge=1,
-        description="env-step budget of one primitive (rounded up to whole PPO iterations); None: whatever is left of "
-        "ppo.total_env_steps ([I])",
+        description="env-step budget of one primitive (rounded up to whole PPO iterations); None: whatever is left of ppo.total_env_steps ([I])",
     )
     primitive0: Path | None = Field(
         None,
@@ -106,9 +104,7 @@ class PMCPParams(BaseModel):
         "primitive 1 ([I]; PHC+ on top of an existing PHC; [C] likewise starts PMCP from a trained imitator's checkpoint). "
         "Relative to the spec file",
     )
-    max_primitives: int = Field(
-        3, ge=1, description="most imitation primitives ([P] 3 imitation primitives + the recovery primitive; [C] num_prim 4)"
-    )
+    max_primitives: int = Field(3, ge=1, description="most imitation primitives ([P] 3 imitation primitives + the recovery primitive; [C] num_prim 4)")
     eval_every: int = Field(
         50,
         ge=1,
@@ -123,9 +119,7 @@ class PMCPParams(BaseModel):
         "more clips succeeding than ever before and no clip succeeding for the first time); 0: train for the whole budget "
         "([P] 'until the success rate no longer increases'; [C] forward_pmcp uses the last 5 evaluations)",
     )
-    stop_on_success: bool = Field(
-        True, description="freeze a primitive as soon as an evaluation succeeds on every clip of its set ([I])"
-    )
+    stop_on_success: bool = Field(True, description="freeze a primitive as soon as an evaluation succeeds on every clip of its set ([I])")
     init: Literal["copy", "fresh"] = Field(
         "copy",
         description="primitive k+1 starts from primitive k's weights, critic and normalizer ('copy': [P] variant (b) weight "
@@ -145,9 +139,7 @@ class PMCPParams(BaseModel):
         "sum_i c_i mu_i / sum_i c_i with c_i = relu(w_i) + composer_eps ([P] Eq. 5/6, MCP with the primitives' equal "
         "fixed sigma) or 'weighted_sum' = sum_i relu(w_i) mu_i, unnormalized ([C] ReLU composer output)",
     )
-    composer_eps: float = Field(
-        1e-6, ge=0.0, description="multiplicative form: added to every relu(w_i) so that the normalizer never vanishes ([I])"
-    )
+    composer_eps: float = Field(1e-6, ge=0.0, description="multiplicative form: added to every relu(w_i) so that the normalizer never vanishes ([I])")
     composer_init_weight: float | None = Field(
         None,
         description="initial composer output (the action head's bias) for every primitive; None: 1/K, i.e. the mean of the "

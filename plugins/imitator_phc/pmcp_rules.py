@@ -97,10 +97,7 @@ def pmcp_report(state: dict[str, Any], params: PMCPParams) -> str:
     lines = [
         "# PMCP",
         "",
-        (
-            f"{len(prims)} primitive(s) (init {params.init!r}), composer {params.composer_form!r}; "
-            f"primitive phase ended: {state.get('stop_reason')}."
-        ),
+        (f"{len(prims)} primitive(s) (init {params.init!r}), composer {params.composer_form!r}; primitive phase ended: {state.get('stop_reason')}."),
         "",
         "| primitive | clips | end | iterations | env steps | success on its clips |",
         "|---|---|---|---|---|---|",

@@ -33,9 +33,7 @@ from mocap.state import HUMANOID_FIELDS, HumanoidState
 _FIELDS = HUMANOID_FIELDS
 
 
-def recovery_reference(
-    state: HumanoidState, ref: HumanoidState, params: RecoveryGoalParams
-) -> tuple[HumanoidState, Tensor]:
+def recovery_reference(state: HumanoidState, ref: HumanoidState, params: RecoveryGoalParams) -> tuple[HumanoidState, Tensor]:
     """(the reference to build the goal from, (N,) bool "far" mask) — module docstring.
 
     Rows that are close are returned unchanged; far rows get the masked reference.
@@ -78,8 +76,6 @@ def recovery_reference(
         body_ang_vel=body_ang_vel,
     )
     return masked, far
-
-
 
 
 def point_goal_reward(prev_dist: Tensor, dist: Tensor, form: Literal["paper", "code"] = "paper") -> Tensor:

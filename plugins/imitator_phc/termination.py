@@ -13,13 +13,15 @@ SMPL; by default the skeleton's ``feet``, which are the ankles and toes of ``smp
 
 Optional fall check (not PHC imitation; ASE/AMP style): terminate when a
 non-foot body touches the ground (``SimState.body_contact``), optionally only when that body is
-also below ``fall_height``.
+also below ``fall_height``. Per-clip contact rules (:func:`contact_table`, MimicKit-style) replace
+the non-foot set by the bodies each clip may not touch the ground with.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Literal, Sequence
+import fnmatch
+from typing import Any, Literal, Mapping, Sequence
 
 import torch
 from torch import Tensor
@@ -85,8 +87,33 @@ def imitation_failed(
     return failed
 
 
+def contact_table(skeleton: Skeleton, clip_names: Sequence[str], allowed: Mapping[str, Sequence[str]], default: Sequence[str] | None = None) -> Tensor:
+    """(C, B) bool: per clip, the bodies whose ground contact ends an episode (all but the allowed).
+
+    Clip ``c`` takes the body globs of the first key of ``allowed`` (an ``fnmatch`` glob) its name
+    matches, else ``default`` (None: the skeleton's feet). A body glob that matches no body is a
+    ValueError naming it (a typo would silently allow nothing)."""
+    bodies = list(skeleton.body_names)
+
+    def mask(globs: Sequence[str]) -> Tensor:
+        ok = torch.zeros(len(bodies), dtype=torch.bool)
+        for g in globs:
+            hit = [i for i, b in enumerate(bodies) if fnmatch.fnmatchcase(b, g)]
+            if not hit:
+                raise ValueError(f"contact_rules: no body of the skeleton matches {g!r} (bodies: {', '.join(bodies)})")
+            ok[hit] = True
+        return ~ok
+
+    fallback = mask(list(skeleton.feet) if default is None else list(default))
+    rows = []
+    for name in clip_names:
+        key = next((k for k in allowed if fnmatch.fnmatchcase(name, k)), None)
+        rows.append(fallback if key is None else mask(list(allowed[key])))
+    return torch.stack(rows) if rows else torch.zeros(0, len(bodies), dtype=torch.bool)
+
+
 def fallen(state: SimState, non_foot: Tensor, fall_height: float | None = None) -> Tensor:
-    """(N,) bool: a non-foot body (``non_foot`` (B,) mask) touches the ground [and is below ``fall_height``]."""
+    """(N,) bool: a non-foot body (``non_foot`` (B,) or per-env (N, B) mask) touches the ground [and is below ``fall_height``]."""
     if state.body_contact.numel() == 0:
         return torch.zeros(state.body_pos.shape[0], dtype=torch.bool, device=state.body_pos.device)
     touch = state.body_contact.bool() & non_foot.to(state.body_contact.device)
@@ -136,18 +163,27 @@ class Termination:
             fall_height=fall_height,
         )
 
-    def __call__(self, state: SimState, ref: HumanoidState, progress: Tensor | None = None) -> tuple[Tensor, dict[str, Tensor]]:
+    def __call__(
+        self, state: SimState, ref: HumanoidState, progress: Tensor | None = None, forbidden: Tensor | None = None, forbidden_height: float | None = None
+    ) -> tuple[Tensor, dict[str, Tensor]]:
         """``(terminated (N,), parts)``; parts: ``tracking``, ``fall``, ``unstable`` (N,) bool each.
 
-        Unstable envs (``state.unstable``) always terminate.
+        Unstable envs (``state.unstable``) always terminate. ``forbidden`` (N, B) bool: per-env bodies
+        whose ground contact is a fall (per-clip contact rules, :func:`contact_table`), checked below
+        ``forbidden_height`` when given; it replaces ``fall_check``'s non-foot rule.
         """
         dist = body_distances(state, ref)
         tracking = imitation_failed(dist, self.checked, self.rule, self.threshold, progress, self.grace)
         tracking = tracking | ~torch.isfinite(dist).all(-1)
         n = dist.shape[0]
-        fall = fallen(state, self.non_foot, self.fall_height) if self.fall_check else torch.zeros(n, dtype=torch.bool, device=dist.device)
+        if forbidden is not None:
+            fall = fallen(state, forbidden, forbidden_height)
+        elif self.fall_check:
+            fall = fallen(state, self.non_foot, self.fall_height)
+        else:
+            fall = torch.zeros(n, dtype=torch.bool, device=dist.device)
         unstable = state.unstable.bool() if state.unstable.numel() else torch.zeros(n, dtype=torch.bool, device=dist.device)
         return tracking | fall | unstable, {"tracking": tracking, "fall": fall, "unstable": unstable}
 
 
-__all__ = ["DEFAULT_GRACE", "DEFAULT_THRESHOLD", "Termination", "body_distances", "checked_mask", "fallen", "imitation_failed"]
+__all__ = ["DEFAULT_GRACE", "DEFAULT_THRESHOLD", "Termination", "body_distances", "checked_mask", "contact_table", "fallen", "imitation_failed"]

@@ -49,15 +49,11 @@ class HybridParams(BaseModel):
     num_codebooks: int = Field(8, ge=1, description="RVQ depth N ([P] 8)")
     codebook_size: int = Field(1024, ge=1, description="codes per RVQ codebook K ([P] 1024)")
     single_codebook_size: int = Field(8192, ge=1, description="codes of the single VQ of 'discrete' / 'hybrid_vq' ([P] 8192)")
-    task_codebooks: int = Field(
-        1, ge=1, description="active codebooks M of the task action space ([P] 1: in-betweening, navigation; 2: HMD tracking)"
-    )
+    task_codebooks: int = Field(1, ge=1, description="active codebooks M of the task action space ([P] 1: in-betweening, navigation; 2: HMD tracking)")
     # --------------------------------------------------------------------------- quantizer
     ema_decay: float = Field(0.99, gt=0.0, le=1.0, description="EMA decay of the codebooks ([DEFAULT] 0.99; [P] EMA is used)")
     ema_eps: float = Field(1e-5, gt=0.0, description="Laplace smoothing of the EMA cluster sizes ([DEFAULT])")
-    dead_threshold: float = Field(
-        2.0, ge=0.0, description="codes with EMA cluster size below this are reset from the batch ([DEFAULT] 2.0; 0 disables)"
-    )
+    dead_threshold: float = Field(2.0, ge=0.0, description="codes with EMA cluster size below this are reset from the batch ([DEFAULT] 2.0; 0 disables)")
     dead_threshold_mode: Literal["absolute", "relative"] = Field(
         "absolute",
         description="'absolute': dead_threshold is an EMA count per batch (vector-quantize-pytorch's threshold_ema_dead_code; "
@@ -96,15 +92,11 @@ class HybridParams(BaseModel):
     obs_clip: float | None = Field(5.0, gt=0.0, description="clip of the normalized observations (None: none)")
     # ------------------------------------------------------------------------------ losses
     action_weight: float = Field(10.0, ge=0.0, description="weight of L_action ([P] Table 5: 10)")
-    reg_weight: float | None = Field(
-        None, ge=0.0, description="weight α of L_reg; None: [P] 0.05 (discrete, hybrid) or 0.005 (continuous)"
-    )
+    reg_weight: float | None = Field(None, ge=0.0, description="weight α of L_reg; None: [P] 0.05 (discrete, hybrid) or 0.005 (continuous)")
     commit_weight: float = Field(1.0, ge=0.0, description="weight β of L_commit ([P] 1.0)")
     mm_weight: tuple[float, float] = Field((0.1, 1.0), description="γ of L_mm, ramped start → end ([P] 0.1 → 1.0)")
     kl_weight: tuple[float, float] = Field((0.05, 0.5), description="'continuous': KL weight start → end ([P] 0.05 → 0.5)")
-    ramp_fraction: float = Field(
-        1.0, gt=0.0, le=1.0, description="training progress at which the linear ramps reach their end ([DEFAULT]; not in paper)"
-    )
+    ramp_fraction: float = Field(1.0, gt=0.0, le=1.0, description="training progress at which the linear ramps reach their end ([DEFAULT]; not in paper)")
 
     @model_validator(mode="after")
     def _check(self) -> HybridParams:

@@ -193,9 +193,7 @@ class HybridLatent(LatentSpace):
 
     @classmethod
     def from_config(cls, config: dict[str, Any]) -> HybridLatent:
-        return cls(
-            HybridParams.model_validate(config["params"]), int(config["proprio_dim"]), int(config["goal_dim"]), int(config["action_dim"])
-        )
+        return cls(HybridParams.model_validate(config["params"]), int(config["proprio_dim"]), int(config["goal_dim"]), int(config["action_dim"]))
 
     @property
     def num_task_codebooks(self) -> int:
@@ -358,9 +356,7 @@ class HybridLatent(LatentSpace):
         codes = self.sample_task_action(p.shape[0], n_active, generator=generator, device=p.device)
         return self._compose(p, codes)
 
-    def random_action(
-        self, obs: Observations, noise_scale: float = 1.0, generator: torch.Generator | None = None, n_active: int | None = None
-    ) -> Tensor:
+    def random_action(self, obs: Observations, noise_scale: float = 1.0, generator: torch.Generator | None = None, n_active: int | None = None) -> Tensor:
         """(N, A) decoder output of an unconditional-generation step: :meth:`generate`'s latent
         (uniformly random codes of the first ``n_active`` levels, plus z_p for the hybrid; the
         continuous baseline samples N(μ_p, (noise_scale σ_p)²))."""
@@ -446,9 +442,7 @@ class HybridLatent(LatentSpace):
 def save_hybrid(path: Path | str, model: HybridLatent, extra: dict[str, Any] | None = None, *, spec_yaml: str | None = None) -> None:
     """Write ``model`` (config + ``state_dict``, normalizers and codebooks included) atomically."""
     state = {k: v.detach().cpu() if isinstance(v, Tensor) else v for k, v in model.state_dict().items()}
-    save_checkpoint(
-        Path(path), {"format": CHECKPOINT_FORMAT, "config": model.config, "state_dict": state, "extra": extra or {}}, spec_yaml=spec_yaml
-    )
+    save_checkpoint(Path(path), {"format": CHECKPOINT_FORMAT, "config": model.config, "state_dict": state, "extra": extra or {}}, spec_yaml=spec_yaml)
 
 
 def _extract_state(data: dict[str, Any], path: Path) -> tuple[dict[str, Any], dict[str, Any] | None]:

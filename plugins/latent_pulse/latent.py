@@ -123,9 +123,7 @@ class PulseLatent(LatentSpace):
             from mocap_pulse.vq import PartitionedVQ
 
             self.enc: nn.Module = mlp([P + G, *p.encoder_hidden, Z], p.activation)
-            self.vq = PartitionedVQ(
-                Z, p.vq_partitions, p.vq_codebook_size, shared=p.vq_shared_codebook, decay=p.vq_decay, dead_threshold=p.vq_dead_threshold
-            )
+            self.vq = PartitionedVQ(Z, p.vq_partitions, p.vq_codebook_size, shared=p.vq_shared_codebook, decay=p.vq_decay, dead_threshold=p.vq_dead_threshold)
             if p.prior == "learned":
                 self.code_prior = mlp([P, *p.prior_hidden, p.vq_partitions * p.vq_codebook_size], p.activation)
         else:
@@ -193,9 +191,7 @@ class PulseLatent(LatentSpace):
         p = p.to(self.device, torch.float32)
         if g is not None:
             if g.shape[-1] != self.goal_dim:
-                raise ValueError(
-                    f"pulse expects an imitation goal of {self.goal_dim} dims, got {g.shape[-1]} (does goal_obs match the imitator's obs?)"
-                )
+                raise ValueError(f"pulse expects an imitation goal of {self.goal_dim} dims, got {g.shape[-1]} (does goal_obs match the imitator's obs?)")
             g = g.to(self.device, torch.float32)
         if self.params.normalizer != "none":
             p = self.proprio_norm.normalize(p)

@@ -85,8 +85,7 @@ class PulseParams(BaseModel):
     alpha: float = Field(0.005, ge=0, description="weight α of L_regu ([P] Table 4: 0.005)")
     regu_form: Literal["paper", "code"] = Field(
         "paper",
-        description="L_regu: 'paper' = ‖μ_t − μ_{t−1}‖² ([P] Eq. 3) or 'code' = ‖μ_t − φ μ_{t−1}‖ un-squared AR(1) ([CODE]); "
-        "both masked at episode starts",
+        description="L_regu: 'paper' = ‖μ_t − μ_{t−1}‖² ([P] Eq. 3) or 'code' = ‖μ_t − φ μ_{t−1}‖ un-squared AR(1) ([CODE]); both masked at episode starts",
     )
     regu_phi: float = Field(0.99, description="φ of the 'code' AR(1) form ([CODE] 0.99)")
     beta_start: float = Field(0.01, ge=0, description="KL weight β before the anneal ([P] 0.01)")
@@ -97,9 +96,7 @@ class PulseParams(BaseModel):
         "2.5e9 -> 5e9 samples (inconsistent with its ~1e9 total); [CODE]: epochs 2500 -> 5000 of ~10,170, i.e. ~0.246 -> 0.492 [INF]",
     )
     # ------------------------------------------------------------------------------ ablations
-    prior: Literal["learned", "standard"] = Field(
-        "learned", description="'learned' R(z|s^p) ([P]) or 'standard' N(0, I) (Table 3 rows 1, 2)"
-    )
+    prior: Literal["learned", "standard"] = Field("learned", description="'learned' R(z|s^p) ([P]) or 'standard' N(0, I) (Table 3 rows 1, 2)")
     task_action: Literal["residual", "absolute"] = Field(
         "residual", description="task action: 'residual' z = μ^p + z^task ([P] Eq. 4) or 'absolute' z = z^task (Table 3 rows 1, 2, 5)"
     )
@@ -128,9 +125,7 @@ class PulseParams(BaseModel):
     rl_reward_form: Literal["paper", "code"] = Field(
         "paper", description="rl_term: the phc imitation reward's error form (mocap.imitation_rewards: 'paper' norms, 'code' mean squares)"
     )
-    rl_critic_hidden: list[int] = Field(
-        default_factory=lambda: [256, 256], min_length=1, description="rl_term: critic MLP hidden sizes on [s^p | s^g] ([CPU])"
-    )
+    rl_critic_hidden: list[int] = Field(default_factory=lambda: [256, 256], min_length=1, description="rl_term: critic MLP hidden sizes on [s^p | s^g] ([CPU])")
     latent_kind: Literal["gaussian", "sphere", "vq"] = Field(
         "gaussian",
         description="'gaussian' ([P]); 'sphere' (App. C.3, like ASE: z = x / ‖x‖ of the Gaussian sample x; the KL stays on the "
@@ -140,9 +135,7 @@ class PulseParams(BaseModel):
     )
     vq_partitions: int = Field(8, ge=1, description="vq: partitions G of z, each quantized on its own ([P] 8; latent_dim must be a multiple)")
     vq_codebook_size: int = Field(64, ge=2, description="vq: codes K per dictionary ([P] 64)")
-    vq_shared_codebook: bool = Field(
-        True, description="vq: one dictionary shared by all partitions (Liu et al. 2021, [INF] for PULSE) or one per partition"
-    )
+    vq_shared_codebook: bool = Field(True, description="vq: one dictionary shared by all partitions (Liu et al. 2021, [INF] for PULSE) or one per partition")
     vq_commit_weight: float = Field(0.25, ge=0, description="vq: weight of the commitment loss (VQ-VAE's β = 0.25; [P] not given)")
     vq_decay: float = Field(0.99, gt=0, le=1, description="vq: EMA decay of the codebooks (VQ-VAE-EMA; 1 freezes them)")
     vq_dead_threshold: float = Field(2.0, ge=0, description="vq: codes whose EMA usage falls below this are reset from the batch (0: off)")

@@ -207,9 +207,7 @@ def segment_labels(frame_clip: Tensor, fps: Tensor, segment_s: float = 2.0, gap_
 
 
 @torch.no_grad()
-def latent_label_metrics(
-    latent: Any, library: Any, folds: int = 5, bins: int = 100, labels: str = "segments"
-) -> dict[str, float]:
+def latent_label_metrics(latent: Any, library: Any, folds: int = 5, bins: int = 100, labels: str = "segments") -> dict[str, float]:
     """``lda_accuracy`` and ``mutual_information`` (nats) of the per-frame latents (posterior means
     of the window centred at every frame) of ``library`` against the paper's 2-s segment classes
     (``labels="segments"``, frames in the 2-s gaps left out) or each frame's clip (``"clips"``)."""

@@ -34,6 +34,7 @@ from mocap_vmp.tracking_params import DomainRandomizationParams, Range
 
 __all__ = ["DomainRandomizationParams", "DomainRandomizer", "default_push_bodies"]
 
+
 def default_push_bodies(skeleton: Any) -> list[str]:
     names = [skeleton.bodies[0].name]
     names += [b.name for b in skeleton.bodies[1:] if any(k in b.name for k in ("head", "hand", "foot"))]

@@ -18,6 +18,7 @@ from mocap_vmp.features import FeatureLayout, clip_starts, standardize
 from mocap_vmp.tracking_params import VmpTrackerParams, conditioning_dim, conditioning_spec
 from mocap_vmp.tracking_reward import state_features
 
+
 # ------------------------------------------------------------------------- the conditioning
 class VmpConditioning:
     """Builds ``c_t`` for (clip, time) pairs of a motion library from a trained :class:`VmpLatent`.

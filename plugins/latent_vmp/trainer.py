@@ -198,9 +198,7 @@ def reconstruction_table(latent: VmpLatent, lib: Any, batch: int = 1024) -> tupl
         tot = sum(m[g] for g in GROUPS)
         lines.append(f"| {name} | {n} | " + " | ".join(f"{m[g]:.4f}" for g in GROUPS) + f" | {tot:.4f} | {m['q_deg']:.2f} |")
     mean = {g: v / max(count, 1) for g, v in sums.items()}
-    lines.append(
-        f"| **all** | {count} | " + " | ".join(f"{mean[g]:.4f}" for g in GROUPS) + f" | {sum(mean[g] for g in GROUPS):.4f} | {mean['q_deg']:.2f} |"
-    )
+    lines.append(f"| **all** | {count} | " + " | ".join(f"{mean[g]:.4f}" for g in GROUPS) + f" | {sum(mean[g] for g in GROUPS):.4f} | {mean['q_deg']:.2f} |")
     doc = (
         "# VMP stage I: window reconstruction\n\n"
         "Mean per-frame squared error per feature group over the window centred at every frame of each clip, decoded "

@@ -27,9 +27,7 @@ class VmpParams(BaseModel):
         "clips' own frames (no resampling [X]: clips at different rates give windows of different durations)",
     )
     latent_dim: int = Field(64, ge=1, description="d_z [P: 64]")
-    channels: int = Field(
-        48, ge=1, description="conv width [X: the paper gives no widths; 96 reaches its ~0.8 M parameters; 48 is the CPU default]"
-    )
+    channels: int = Field(48, ge=1, description="conv width [X: the paper gives no widths; 96 reaches its ~0.8 M parameters; 48 is the CPU default]")
     res_blocks: int = Field(4, ge=0, description="ResNet blocks in encoder and decoder [P: 4]")
     downsample: int = Field(2, ge=0, description="stride-2 conv layers before the ResNet blocks [X: not in the paper]")
     dilation_growth: int = Field(3, ge=1, description="ResBlock i has dilation growth^i [X: Jukebox-style; not in the paper]")
@@ -38,9 +36,7 @@ class VmpParams(BaseModel):
         description="bodies whose root-relative positions form p [P: hands and feet]; None = the hands and feet among "
         "the skeleton's end effectors (names containing 'hand' or 'foot')",
     )
-    std_min: float = Field(
-        1e-6, gt=0, description="floor of the standardization std, for features that never vary in the data [X: not in the paper]"
-    )
+    std_min: float = Field(1e-6, gt=0, description="floor of the standardization std, for features that never vary in the data [X: not in the paper]")
     latent_for_policy: Literal["mean", "sample"] = Field(
         "mean", description="z_t given to the policy and precomputed per frame: posterior mean or a sample [X: paper silent]"
     )

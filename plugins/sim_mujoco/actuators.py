@@ -95,8 +95,7 @@ class ActuatorModelParams(BaseModel):
     max_stability_ratio: float = Field(
         1.4,
         gt=0,
-        description="refuse a model whose explicit-damping ratio max_j timestep kd_j / M_jj (rest pose) exceeds this "
-        "(2 is the linear stability bound) [X]",
+        description="refuse a model whose explicit-damping ratio max_j timestep kd_j / M_jj (rest pose) exceeds this (2 is the linear stability bound) [X]",
     )
 
     @model_validator(mode="after")

@@ -50,12 +50,8 @@ def cmd_render(
         bool, typer.Option("--imitator-only", help="policy mode: for a latent space, roll out the imitator it was distilled from")
     ] = False,
     source: Annotated[str, typer.Option("--source", help="registered motion source (deepmimic, amass, npz, ...)")] = "deepmimic",
-    path: Annotated[
-        Optional[list[Path]], typer.Option("--path", "-p", help="file or folder for the source's 'paths' (repeatable)", show_default=False)
-    ] = None,
-    humanoid: Annotated[
-        Optional[str], typer.Option("--humanoid", help="humanoid to load onto (default: the source's own, e.g. amp for deepmimic)")
-    ] = None,
+    path: Annotated[Optional[list[Path]], typer.Option("--path", "-p", help="file or folder for the source's 'paths' (repeatable)", show_default=False)] = None,
+    humanoid: Annotated[Optional[str], typer.Option("--humanoid", help="humanoid to load onto (default: the source's own, e.g. amp for deepmimic)")] = None,
     out: Annotated[Optional[Path], typer.Option("--out", "-o", help="output .mp4 or .gif (default: <motion>.mp4)")] = None,
     seconds: Annotated[Optional[float], typer.Option("--seconds", help="length of the video, s (default: the clip's duration)")] = None,
     fps: Annotated[float, typer.Option("--fps", help="frame rate of the video, Hz")] = 30.0,
@@ -108,10 +104,17 @@ def cmd_render(
     except UserError as exc:  # RenderUnavailable
         raise _fail(str(exc)) from None
     err = Console(stderr=True)
-    with recorder, Progress(
-        TextColumn("rendering {task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
-        console=err, transient=True,
-    ) as progress:
+    with (
+        recorder,
+        Progress(
+            TextColumn("rendering {task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeRemainingColumn(),
+            console=err,
+            transient=True,
+        ) as progress,
+    ):
         task = progress.add_task(motion, total=n)
         for i in range(n):
             recorder.add_frame(frames.root_pos[i], frames.root_rot[i], frames.dof_pos[i])
@@ -120,14 +123,20 @@ def cmd_render(
             written = recorder.save(out_path)
         except OSError as exc:
             raise _fail(f"cannot write {out_path}: {exc}") from None
-    Console(soft_wrap=True).print(
-        f"wrote {written} ({n} frames, {width}x{height}, {fps:g} fps, {n / fps:.2f} s)", highlight=False
-    )
+    Console(soft_wrap=True).print(f"wrote {written} ({n} frames, {width}x{height}, {fps:g} fps, {n / fps:.2f} s)", highlight=False)
 
 
 def _render_policy(
-    target: Path, out: Path, clip: str | None, seconds: float | None, generate: bool, noise: float, seed: int, imitator_only: bool,
-    width: int, height: int,
+    target: Path,
+    out: Path,
+    clip: str | None,
+    seconds: float | None,
+    generate: bool,
+    noise: float,
+    seed: int,
+    imitator_only: bool,
+    width: int,
+    height: int,
 ) -> None:
     """Policy mode: :func:`mocap.play.render_policy`, the rollout ``mocap play`` shows (frames at the
     simulator's control rate; ``--fps`` is for kinematic playback)."""
@@ -135,8 +144,16 @@ def _render_policy(
 
     with Console(stderr=True).status(f"rendering {target}"):
         written, what = render_policy(
-            target, out, clip=clip, seconds=seconds, generate=generate, noise=noise, seed=seed, imitator_only=imitator_only,
-            width=width, height=height,
+            target,
+            out,
+            clip=clip,
+            seconds=seconds,
+            generate=generate,
+            noise=noise,
+            seed=seed,
+            imitator_only=imitator_only,
+            width=width,
+            height=height,
         )
     Console(soft_wrap=True).print(f"wrote {written} ({what}, {width}x{height})", highlight=False)
 
@@ -157,9 +174,7 @@ def _sample(clip: Any, humanoid: str, seconds: float | None, fps: float) -> tupl
 
 
 def cmd_play(
-    target: Annotated[
-        Path, typer.Argument(help="a checkpoint (policy.pt, latent.pt), a checkpoint directory (checkpoints/<name>), a run directory or a spec")
-    ],
+    target: Annotated[Path, typer.Argument(help="a checkpoint (policy.pt, latent.pt), a checkpoint directory (checkpoints/<name>), a run directory or a spec")],
     clip: Annotated[Optional[str], typer.Option("--clip", help="clip to start with (default: the first)")] = None,
     generate: Annotated[bool, typer.Option("--generate", help="start with random motion from the latent prior")] = False,
     speed: Annotated[float, typer.Option("--speed", help="playback speed (slow motion < 1), nearest of 1/16 .. 4")] = 1.0,
@@ -173,8 +188,16 @@ def cmd_play(
     from mocap.play import play
 
     play(
-        target, clip=clip, generate=generate, speed=speed, noise=noise, seed=seed, horizon=horizon,
-        motions=motions, imitator_only=imitator_only, console=Console(stderr=True),
+        target,
+        clip=clip,
+        generate=generate,
+        speed=speed,
+        noise=noise,
+        seed=seed,
+        horizon=horizon,
+        motions=motions,
+        imitator_only=imitator_only,
+        console=Console(stderr=True),
     )
 
 

@@ -133,15 +133,14 @@ def build_mjcf(
         body = skeleton.bodies[i]
         pad = "  " * depth
         pos = (0.0, 0.0, height) if i == 0 else body.offset
-        lines.append(f"{pad}<body name={quoteattr(body.name)} pos=\"{_vec(pos)}\">")
+        lines.append(f'{pad}<body name={quoteattr(body.name)} pos="{_vec(pos)}">')
         if i == 0:
             lines.append(f'{pad}  <freejoint name="{ROOT_JOINT}"/>')
         else:
             for h in body.joint.hinges:
                 lim = f'limited="true" range="{_f(h.range[0])} {_f(h.range[1])}"' if joint_limits else 'limited="false"'
                 lines.append(
-                    f"{pad}  <joint name={quoteattr(h.name)} type=\"hinge\" axis=\"{_vec(h.axis)}\" {lim} "
-                    f'armature="{_f(h.armature)}" damping="0" stiffness="0"/>'
+                    f'{pad}  <joint name={quoteattr(h.name)} type="hinge" axis="{_vec(h.axis)}" {lim} armature="{_f(h.armature)}" damping="0" stiffness="0"/>'
                 )
         if not body.geoms:
             # a massless body would be rejected by MuJoCo; give it an explicit point inertia
@@ -156,7 +155,7 @@ def build_mjcf(
     emit_body(0, 2)
 
     actuators = [
-        f"    <position name={quoteattr(h.name)} joint={quoteattr(h.name)} kp=\"{_f(h.kp)}\" kv=\"{_f(h.kd)}\" "
+        f'    <position name={quoteattr(h.name)} joint={quoteattr(h.name)} kp="{_f(h.kp)}" kv="{_f(h.kd)}" '
         f'ctrllimited="true" ctrlrange="{_f(h.range[0])} {_f(h.range[1])}" '
         f'forcelimited="true" forcerange="{_f(-h.torque_limit)} {_f(h.torque_limit)}"/>'
         for h in skeleton.hinges
@@ -172,8 +171,7 @@ def build_mjcf(
         [
             f"<mujoco model={quoteattr(skeleton.name)}>",
             '  <compiler angle="radian" inertiafromgeom="true" autolimits="true"/>',
-            f'  <option timestep="{_f(timestep)}" integrator="{integrator}" iterations="{iterations}" '
-            f'ls_iterations="{ls_iterations}" gravity="0 0 -9.81"/>',
+            f'  <option timestep="{_f(timestep)}" integrator="{integrator}" iterations="{iterations}" ls_iterations="{ls_iterations}" gravity="0 0 -9.81"/>',
             '  <visual><global offwidth="1280" offheight="720"/><headlight ambient="0.3 0.3 0.3" diffuse="0.6 0.6 0.6"/></visual>',
             "  <asset>",
             '    <texture name="grid" type="2d" builtin="checker" rgb1="0.2 0.3 0.4" rgb2="0.3 0.4 0.5" width="256" height="256"/>',

@@ -15,8 +15,7 @@ def register_simulators(register: Any) -> None:
         "mujoco",
         lazy("mocap_sim_mujoco.simulator:make_simulator"),
         params=MujocoParams,
-        description="MuJoCo: N humanoids stepped by mujoco.rollout on all cores, PD position actuators, "
-        "1/120 s x 4 substeps, optional terrain/target/markers",
+        description="MuJoCo: N humanoids stepped by mujoco.rollout on all cores, PD position actuators, 1/120 s x 4 substeps, optional terrain/target/markers",
     )
 
 

@@ -62,9 +62,7 @@ def _gl_hint() -> str:
 try:
     import mujoco  # noqa: E402
 except Exception as _exc:  # noqa: BLE001 - mujoco loads the MUJOCO_GL backend at import; a missing library breaks it
-    raise RenderUnavailable(
-        f"cannot import mujoco with MUJOCO_GL={os.environ.get('MUJOCO_GL')!r}: {type(_exc).__name__}: {_exc}. {_gl_hint()}"
-    ) from None
+    raise RenderUnavailable(f"cannot import mujoco with MUJOCO_GL={os.environ.get('MUJOCO_GL')!r}: {type(_exc).__name__}: {_exc}. {_gl_hint()}") from None
 
 from mocap.humanoids.common import rest_root_height  # noqa: E402
 from mocap.skeleton import Skeleton  # noqa: E402
@@ -109,8 +107,15 @@ def _floor_and_assets(floor_size: float) -> tuple[str, str]:
 # and casts its shadow on the floor; the world lights of build_mjcf then cast none (the shadow map of
 # a directional light spans the whole 100 m floor, too coarse to show anything).
 _KEY_LIGHT = dict(
-    name="render_key", mode="trackcom", pos="-1.5 -2.5 4.5", dir="0.3 0.5 -0.8",
-    diffuse="0.45 0.45 0.45", specular="0.15 0.15 0.15", cutoff="50", exponent="2", castshadow="true",
+    name="render_key",
+    mode="trackcom",
+    pos="-1.5 -2.5 4.5",
+    dir="0.3 0.5 -0.8",
+    diffuse="0.45 0.45 0.45",
+    specular="0.15 0.15 0.15",
+    cutoff="50",
+    exponent="2",
+    castshadow="true",
 )
 
 
@@ -332,9 +337,7 @@ class VideoRecorder:
             self._lookat += a * (root_pos - self._lookat)
         self.cam.lookat[:] = self._lookat
 
-    def render(
-        self, root_pos: Any, root_rot: Any = None, dof_pos: Any = None, *, ghost: Any = None, markers: Any = None
-    ) -> np.ndarray:
+    def render(self, root_pos: Any, root_rot: Any = None, dof_pos: Any = None, *, ghost: Any = None, markers: Any = None) -> np.ndarray:
         """One frame (H, W, 3) uint8 of the pose, without recording it (see :meth:`add_frame`)."""
         if self._renderer is None:
             raise RuntimeError("the recorder is closed")
@@ -363,9 +366,7 @@ class VideoRecorder:
             self._add_markers(r.scene, markers)
         return r.render().copy()
 
-    def add_frame(
-        self, root_pos: Any, root_rot: Any = None, dof_pos: Any = None, *, ghost: Any = None, markers: Any = None
-    ) -> np.ndarray:
+    def add_frame(self, root_pos: Any, root_rot: Any = None, dof_pos: Any = None, *, ghost: Any = None, markers: Any = None) -> np.ndarray:
         """Render and record one frame; returns it, (H, W, 3) uint8.
 
         Args:
@@ -394,9 +395,7 @@ class VideoRecorder:
         for pos, rgba, radius in items:
             if scene.ngeom >= scene.maxgeom:
                 break
-            mujoco.mjv_initGeom(
-                scene.geoms[scene.ngeom], int(mujoco.mjtGeom.mjGEOM_SPHERE), np.array([radius, 0.0, 0.0]), pos, eye, rgba
-            )
+            mujoco.mjv_initGeom(scene.geoms[scene.ngeom], int(mujoco.mjtGeom.mjGEOM_SPHERE), np.array([radius, 0.0, 0.0]), pos, eye, rgba)
             scene.ngeom += 1
 
     def clear(self) -> None:
@@ -423,8 +422,15 @@ class VideoRecorder:
 
         pad_h, pad_w = self.height % 2, self.width % 2
         writer = iio2.get_writer(
-            str(path), format="FFMPEG", mode="I", fps=self.fps, codec="libx264", pixelformat="yuv420p",
-            macro_block_size=1, quality=8, ffmpeg_log_level="error",
+            str(path),
+            format="FFMPEG",
+            mode="I",
+            fps=self.fps,
+            codec="libx264",
+            pixelformat="yuv420p",
+            macro_block_size=1,
+            quality=8,
+            ffmpeg_log_level="error",
         )
         try:
             for f in self.frames:

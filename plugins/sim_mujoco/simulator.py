@@ -176,9 +176,7 @@ class MujocoSimulator(StateReadout, SimulatorExtras, Simulator):
                 f'rgba="{" ".join(_f(v) for v in p.marker_rgba)}" contype="0" conaffinity="0" group="2"/></body>'
             )
         contact_sensors = [
-            f'<contact {partner} body2="{b.name}" num="1" reduce="netforce" data="found force"/>'
-            for partner in partners
-            for b in skeleton.bodies
+            f'<contact {partner} body2="{b.name}" num="1" reduce="netforce" data="found force"/>' for partner in partners for b in skeleton.bodies
         ]
         force_sensors = [f'<actuatorfrc actuator="{h.name}"/>' for h in skeleton.hinges]
         kin_sensors = [

@@ -116,10 +116,7 @@ class Terrain:
     def asset_xml(self) -> str:
         """The ``<asset>`` element declaring the height field (data is written after compiling)."""
         s = f"{self.size:.9g}"
-        return (
-            f'<asset><hfield name="{TERRAIN_HFIELD}" nrow="{self.n}" ncol="{self.n}" '
-            f'size="{s} {s} {self.elevation:.9g} 0.5"/></asset>'
-        )
+        return f'<asset><hfield name="{TERRAIN_HFIELD}" nrow="{self.n}" ncol="{self.n}" size="{s} {s} {self.elevation:.9g} 0.5"/></asset>'
 
     def geom_xml(self, name: str, friction: float) -> str:
         return (
@@ -185,4 +182,3 @@ def height_map(height_at, center: Tensor, heading: Tensor, shape: tuple[int, int
     x = c * local[..., 0] - s * local[..., 1] + center[:, None, None, 0]
     y = s * local[..., 0] + c * local[..., 1] + center[:, None, None, 1]
     return height_at(torch.stack((x, y), dim=-1))
-

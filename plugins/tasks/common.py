@@ -38,23 +38,17 @@ __all__ = [
 RIGHT_HAND_NAMES: tuple[str, ...] = ("R_Hand", "right_hand")
 
 
-def resolve_body(
-    skeleton: Skeleton, name: str | None, candidates: Sequence[str] = RIGHT_HAND_NAMES
-) -> int:
+def resolve_body(skeleton: Skeleton, name: str | None, candidates: Sequence[str] = RIGHT_HAND_NAMES) -> int:
     """Index of body ``name``, or of the first of ``candidates`` the skeleton has when ``name`` is None."""
     names = tuple(skeleton.body_names)
     if name is not None:
         if name not in names:
-            raise ValueError(
-                f"skeleton {skeleton.name!r} has no body {name!r}; bodies: {', '.join(names)}"
-            )
+            raise ValueError(f"skeleton {skeleton.name!r} has no body {name!r}; bodies: {', '.join(names)}")
         return names.index(name)
     for c in candidates:
         if c in names:
             return names.index(c)
-    raise ValueError(
-        f"skeleton {skeleton.name!r} has none of the bodies {', '.join(candidates)}; name one explicitly"
-    )
+    raise ValueError(f"skeleton {skeleton.name!r} has none of the bodies {', '.join(candidates)}; name one explicitly")
 
 
 def rows(state: SimState, env_ids: Tensor, num_envs: int) -> SimState:
@@ -67,9 +61,7 @@ def rows(state: SimState, env_ids: Tensor, num_envs: int) -> SimState:
         return state
     if n == num_envs:
         return state.index(env_ids.to(state.root_pos.device))
-    raise ValueError(
-        f"reset got {k} env ids and a state with {n} rows (expected {k} or {num_envs})"
-    )
+    raise ValueError(f"reset got {k} env ids and a state with {n} rows (expected {k} or {num_envs})")
 
 
 def wrap_angle(a: Tensor) -> Tensor:
@@ -96,9 +88,7 @@ class MetricSums:
         self._sum: dict[str, float] = {}
         self._count: dict[str, float] = {}
 
-    def add(
-        self, name: str, values: Tensor | float, count: float | None = None
-    ) -> None:
+    def add(self, name: str, values: Tensor | float, count: float | None = None) -> None:
         """Add ``values`` (a tensor: summed, counted by its number of elements) or a float with ``count``."""
         if isinstance(values, Tensor):
             v = values.detach()
@@ -112,11 +102,7 @@ class MetricSums:
 
     def pop(self, totals: Sequence[str] = ()) -> dict[str, float]:
         """Means of every name with data (sums for the names in ``totals``); then clear."""
-        out = {
-            k: (self._sum[k] if k in totals else self._sum[k] / self._count[k])
-            for k in self._sum
-            if self._count[k] > 0
-        }
+        out = {k: (self._sum[k] if k in totals else self._sum[k] / self._count[k]) for k in self._sum if self._count[k] > 0}
         self._sum.clear()
         self._count.clear()
         return out
@@ -144,9 +130,7 @@ class TaskBase:
         self.num_envs = int(num_envs)
         self.device = torch.device(device)
         self.fall = fall
-        self._allowed = allowed_contact_mask(
-            skeleton, fall.allowed_contacts, device=self.device
-        )
+        self._allowed = allowed_contact_mask(skeleton, fall.allowed_contacts, device=self.device)
         self.generator = torch.Generator(device="cpu")
         self.generator.manual_seed(int(seed))
         self.sim: Simulator | None = None
@@ -158,17 +142,13 @@ class TaskBase:
     # -------------------------------------------------------------------------- sampling
     def _rand(self, *shape: int) -> Tensor:
         """U[0, 1) of ``shape`` from the task's generator (CPU, then moved: reproducible anywhere)."""
-        return torch.rand(*shape, generator=self.generator, dtype=torch.float64).to(
-            self.device
-        )
+        return torch.rand(*shape, generator=self.generator, dtype=torch.float64).to(self.device)
 
     def _randint(self, low: int, high: int, n: int) -> Tensor:
         """Integers in ``[low, high)`` (``high`` exclusive, as ``torch.randint``; ``low`` when equal)."""
         if high <= low:
             return torch.full((n,), int(low), dtype=torch.long, device=self.device)
-        return torch.randint(int(low), int(high), (n,), generator=self.generator).to(
-            self.device
-        )
+        return torch.randint(int(low), int(high), (n,), generator=self.generator).to(self.device)
 
     def _ids(self, env_ids: Tensor) -> Tensor:
         return torch.as_tensor(env_ids, dtype=torch.long).reshape(-1).to(self.device)
@@ -206,14 +186,10 @@ class TaskBase:
 
     def _fallen(self, state: SimState) -> Tensor:
         if not self.fall.early_termination:
-            return torch.zeros(
-                state.num_envs, dtype=torch.bool, device=state.root_pos.device
-            )
+            return torch.zeros(state.num_envs, dtype=torch.bool, device=state.root_pos.device)
         contact = self._ground_contact(state)
         if contact.numel() == 0:
-            contact = torch.zeros(
-                state.body_pos.shape[:2], dtype=torch.bool, device=state.root_pos.device
-            )
+            contact = torch.zeros(state.body_pos.shape[:2], dtype=torch.bool, device=state.root_pos.device)
         return fallen(
             state,
             self._allowed.to(contact.device),

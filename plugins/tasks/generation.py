@@ -61,9 +61,7 @@ class GenerationTask(TaskBase, Task):
     #: the task env ignores the policy's action and samples the latent prior (mocap.hierarchy)
     prior_rollout = True
 
-    def __init__(
-        self, params: GenerationTaskParams, *, skeleton: Skeleton, num_envs: int, device: Any = "cpu", seed: int | None = None
-    ):
+    def __init__(self, params: GenerationTaskParams, *, skeleton: Skeleton, num_envs: int, device: Any = "cpu", seed: int | None = None):
         self.params = p = params
         self._setup(p.fall, skeleton, num_envs, device, p.seed if seed is None else seed)
         self.sim_overrides = {}

@@ -227,9 +227,7 @@ class InbetweenTask(TaskBase, Task):
         p = self.params
         k, K, T = int(ids.numel()), p.num_keyframes, p.sequence_steps
         inner = torch.rand(k, T - 1, generator=self.generator).argsort(-1)[:, : K - 2] + 1  # distinct steps in [1, T-1]
-        steps = torch.cat(
-            (torch.zeros(k, 1, dtype=torch.long), inner.sort(-1).values, torch.full((k, 1), T, dtype=torch.long)), -1
-        ).to(self.device)
+        steps = torch.cat((torch.zeros(k, 1, dtype=torch.long), inner.sort(-1).values, torch.full((k, 1), T, dtype=torch.long)), -1).to(self.device)
         self.key_steps[ids] = steps
         ref = self.reference(ids.repeat_interleave(K), steps.reshape(-1))
         pos, rot = self._select(ref)

@@ -90,8 +90,7 @@ def register_tasks(register: Any) -> None:
         "speed",
         lazy("mocap_tasks.speed:make_speed"),
         params=SpeedParams,
-        description="move the root at a target speed U[0, 5] m/s along a target direction; "
-        "r = exp(-0.25 ((v* - v.d)^2 + 0.1 (v.d_perp)^2)); goal obs 3",
+        description="move the root at a target speed U[0, 5] m/s along a target direction; r = exp(-0.25 ((v* - v.d)^2 + 0.1 (v.d_perp)^2)); goal obs 3",
         metrics=_metrics("speed"),
     )
     register(
@@ -130,8 +129,7 @@ def register_tasks(register: Any) -> None:
         "motion_tracking",
         lazy("mocap_tasks.tracking:make_motion_tracking"),
         params=MotionTrackingParams,
-        description="full-body imitation through the latent space: the imitator's goal, PHC imitation reward; "
-        "metrics success, mpjpe_g",
+        description="full-body imitation through the latent space: the imitator's goal, PHC imitation reward; metrics success, mpjpe_g",
         metrics=_metrics("motion_tracking"),
     )
     # terrain, point goal, in-betweening, generation (mocap_tasks.terrain / point_goal / inbetween / generation)
@@ -163,7 +161,6 @@ def register_tasks(register: Any) -> None:
         "generation",
         lazy("mocap_tasks.generation:make_generation"),
         params=GenerationTaskParams,
-        description="unconditional generation: the latent prior is rolled out (task action ignored, reward 0; not "
-        "with scratch); metrics fall rate, diversity",
+        description="unconditional generation: the latent prior is rolled out (task action ignored, reward 0; not with scratch); metrics fall rate, diversity",
         metrics=_metrics("generation"),
     )

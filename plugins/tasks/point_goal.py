@@ -177,8 +177,6 @@ class PointGoalTask(GoalBookkeeping, TaskBase, Task):
         return self._pop_goal_metrics(self._sums.pop(totals=("steps",)))
 
 
-def make_point_goal(
-    params: PointGoalParams, *, skeleton: Skeleton, num_envs: int, device: Any = "cpu", seed: int | None = None, **_: Any
-) -> PointGoalTask:
+def make_point_goal(params: PointGoalParams, *, skeleton: Skeleton, num_envs: int, device: Any = "cpu", seed: int | None = None, **_: Any) -> PointGoalTask:
     """Registry factory of the ``point_goal`` task."""
     return PointGoalTask(params, skeleton=skeleton, num_envs=num_envs, device=device, seed=seed)

@@ -87,9 +87,7 @@ class ReachTask(GoalBookkeeping, TaskBase, Task):
         N, dev, f64 = self.num_envs, self.device, torch.float64
         self.target = torch.zeros(N, 3, dtype=f64, device=dev)
         self.anchor_xy = torch.zeros(N, 2, dtype=f64, device=dev)
-        self.change_at = torch.full(
-            (N,), params.change_steps[0], dtype=torch.long, device=dev
-        )
+        self.change_at = torch.full((N,), params.change_steps[0], dtype=torch.long, device=dev)
         # per-goal bookkeeping for the metrics
         self._init_goals(N, dev)
 
@@ -104,9 +102,7 @@ class ReachTask(GoalBookkeeping, TaskBase, Task):
         lo, hi = p.height_range
         z = lo + (hi - lo) * u[:, 2:]
         self.target[ids] = torch.cat((xy, z), dim=-1)
-        self.change_at[ids] = self.progress[ids] + self._randint(
-            p.change_steps[0], p.change_steps[1], k
-        )
+        self.change_at[ids] = self.progress[ids] + self._randint(p.change_steps[0], p.change_steps[1], k)
         self.goal_steps[ids] = 0
         self.reached_step[ids] = -1
 
@@ -126,11 +122,7 @@ class ReachTask(GoalBookkeeping, TaskBase, Task):
         due = (self.progress >= self.change_at).nonzero().flatten()
         if due.numel():
             self._finish_goals(due)
-            root_xy = (
-                state.root_pos[due, :2].detach().to(self.device)
-                if self.params.anchor == "current_root"
-                else None
-            )
+            root_xy = state.root_pos[due, :2].detach().to(self.device) if self.params.anchor == "current_root" else None
             self._sample(due, root_xy)
 
     # ------------------------------------------------------------------------ observation
@@ -151,9 +143,7 @@ class ReachTask(GoalBookkeeping, TaskBase, Task):
         target = self.target.to(hand)
         r = reach_reward(hand, target, self.params.coefficient)
         dist = torch.linalg.vector_norm(hand - target, dim=-1)
-        new = (self.reached_step < 0) & (
-            dist.to(self.device) <= self.params.success_radius
-        )
+        new = (self.reached_step < 0) & (dist.to(self.device) <= self.params.success_radius)
         self.reached_step = torch.where(new, self.goal_steps + 1, self.reached_step)
         self.last_distance = dist.detach().to(self.last_distance)
         self._sums.add("distance", dist)
@@ -178,6 +168,4 @@ def make_reach(
     **_: Any,
 ) -> ReachTask:
     """Registry factory of the ``reach`` task."""
-    return ReachTask(
-        params, skeleton=skeleton, num_envs=num_envs, device=device, seed=seed
-    )
+    return ReachTask(params, skeleton=skeleton, num_envs=num_envs, device=device, seed=seed)

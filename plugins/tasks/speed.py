@@ -105,9 +105,7 @@ class SpeedTask(TaskBase, Task):
         self.target_dir = torch.zeros(N, 2, dtype=torch.float64, device=dev)
         self.target_dir[:, 0] = 1.0
         self.target_speed = torch.zeros(N, dtype=torch.float64, device=dev)
-        self.change_at = torch.full(
-            (N,), params.change_steps[0], dtype=torch.long, device=dev
-        )
+        self.change_at = torch.full((N,), params.change_steps[0], dtype=torch.long, device=dev)
         self.prev_root_pos = torch.zeros(N, 3, dtype=torch.float64, device=dev)
 
     # ------------------------------------------------------------------------------ goals
@@ -115,12 +113,8 @@ class SpeedTask(TaskBase, Task):
         p = self.params
         k = int(ids.numel())
         lo, hi = p.speed_range
-        self.target_speed[ids] = (lo + (hi - lo) * self._rand(k)).to(
-            self.target_speed.dtype
-        )
-        self.change_at[ids] = self.progress[ids] + self._randint(
-            p.change_steps[0], p.change_steps[1], k
-        )
+        self.target_speed[ids] = (lo + (hi - lo) * self._rand(k)).to(self.target_speed.dtype)
+        self.change_at[ids] = self.progress[ids] + self._randint(p.change_steps[0], p.change_steps[1], k)
         if not new_direction:
             return
         if p.direction == "random":
@@ -130,9 +124,7 @@ class SpeedTask(TaskBase, Task):
         else:
             assert state is not None
             angle = root_heading(state).to(self.device, torch.float64)
-        self.target_dir[ids] = torch.stack(
-            (torch.cos(angle), torch.sin(angle)), dim=-1
-        ).to(self.target_dir.dtype)
+        self.target_dir[ids] = torch.stack((torch.cos(angle), torch.sin(angle)), dim=-1).to(self.target_dir.dtype)
 
     def reset(self, env_ids: Tensor, state: SimState) -> None:
         ids = self._ids(env_ids)
@@ -140,17 +132,13 @@ class SpeedTask(TaskBase, Task):
             return
         r = rows(state, ids, self.num_envs)
         self.progress[ids] = 0
-        self.prev_root_pos[ids] = r.root_pos.detach().to(
-            self.device, self.prev_root_pos.dtype
-        )
+        self.prev_root_pos[ids] = r.root_pos.detach().to(self.device, self.prev_root_pos.dtype)
         self._sample(ids, r, new_direction=True)
 
     def step(self, state: SimState) -> None:
         """Advance counters, resample due goals, remember the root position (module docstring)."""
         self.progress += 1
-        self.prev_root_pos = (
-            state.root_pos.detach().to(self.device, self.prev_root_pos.dtype).clone()
-        )
+        self.prev_root_pos = state.root_pos.detach().to(self.device, self.prev_root_pos.dtype).clone()
         due = (self.progress >= self.change_at).nonzero().flatten()
         if due.numel():
             self._sample(due, None, new_direction=self.params.direction == "random")
@@ -174,9 +162,7 @@ class SpeedTask(TaskBase, Task):
     def root_velocity(self, state: SimState) -> Tensor:
         """(N, 2) horizontal root velocity used by the reward (``velocity`` switch)."""
         if self.params.velocity == "finite_difference":
-            return ((state.root_pos - self.prev_root_pos.to(state.root_pos)) / self.dt)[
-                :, :2
-            ]
+            return ((state.root_pos - self.prev_root_pos.to(state.root_pos)) / self.dt)[:, :2]
         return state.root_lin_vel[:, :2]
 
     def reward(self, state: SimState, actions: Tensor) -> Tensor:
@@ -192,9 +178,7 @@ class SpeedTask(TaskBase, Task):
         s = self._sums
         s.add("speed_error", (v_star - along).abs())
         s.add("tangent_speed", tangent.abs())
-        s.add(
-            "velocity_error", torch.linalg.vector_norm(v - v_star[:, None] * d, dim=-1)
-        )
+        s.add("velocity_error", torch.linalg.vector_norm(v - v_star[:, None] * d, dim=-1))
         s.add("heading_error", angle_between_2d(facing, d))
         s.add("reward", r)
         s.add("steps", float(r.numel()), count=1)
@@ -217,6 +201,4 @@ def make_speed(
     **_: Any,
 ) -> SpeedTask:
     """Registry factory of the ``speed`` task."""
-    return SpeedTask(
-        params, skeleton=skeleton, num_envs=num_envs, device=device, seed=seed
-    )
+    return SpeedTask(params, skeleton=skeleton, num_envs=num_envs, device=device, seed=seed)

@@ -130,9 +130,7 @@ class StrikeTask(TaskBase, Task):
         seed: int | None = None,
     ):
         self.params = p = params
-        self._setup(
-            p.termination, skeleton, num_envs, device, p.seed if seed is None else seed
-        )
+        self._setup(p.termination, skeleton, num_envs, device, p.seed if seed is None else seed)
         self.max_reward = 2.0 if p.reward == "paper" else 1.0
         hx, hy, hz = p.half_size
         self.sim_overrides = {
@@ -165,9 +163,7 @@ class StrikeTask(TaskBase, Task):
     # -------------------------------------------------------------------------- simulator
     def _need_sim(self) -> Any:
         if self.sim is None:
-            raise RuntimeError(
-                "the strike task needs the simulator: call attach(sim) with a simulator built with sim_overrides"
-            )
+            raise RuntimeError("the strike task needs the simulator: call attach(sim) with a simulator built with sim_overrides")
         return self.sim
 
     def target_state(self) -> Any:
@@ -177,9 +173,7 @@ class StrikeTask(TaskBase, Task):
     def target_contact(self, state: SimState) -> Tensor:
         """(N, B) bool: bodies touching the box (a contact, but not with the ground)."""
         if state.body_contact.numel() == 0:
-            return torch.zeros(
-                state.body_pos.shape[:2], dtype=torch.bool, device=state.root_pos.device
-            )
+            return torch.zeros(state.body_pos.shape[:2], dtype=torch.bool, device=state.root_pos.device)
         return state.body_contact & ~self._ground_contact(state)
 
     # ------------------------------------------------------------------------------ goals
@@ -221,9 +215,7 @@ class StrikeTask(TaskBase, Task):
         """Advance counters; remember the root position (module docstring)."""
         self.progress += 1
         self.steps_in_episode += 1
-        self.prev_root_pos = (
-            state.root_pos.detach().to(self.device, torch.float64).clone()
-        )
+        self.prev_root_pos = state.root_pos.detach().to(self.device, torch.float64).clone()
 
     def _finish_episodes(self, ids: Tensor) -> None:
         ids = ids[self.steps_in_episode[ids] > 0]
@@ -271,9 +263,7 @@ class StrikeTask(TaskBase, Task):
     def root_velocity(self, state: SimState) -> Tensor:
         """(N, 2) horizontal root velocity of the code reward (``velocity`` switch)."""
         if self.params.velocity == "finite_difference":
-            return ((state.root_pos - self.prev_root_pos.to(state.root_pos)) / self.dt)[
-                :, :2
-            ]
+            return ((state.root_pos - self.prev_root_pos.to(state.root_pos)) / self.dt)[:, :2]
         return state.root_lin_vel[:, :2]
 
     def reward(self, state: SimState, actions: Tensor) -> Tensor:
@@ -302,23 +292,17 @@ class StrikeTask(TaskBase, Task):
         self._sums.add("steps", float(r.numel()), count=1)
         return r
 
-    def illegal_contact(
-        self, state: SimState, rule: Literal["paper", "code"] | None = None
-    ) -> Tensor:
+    def illegal_contact(self, state: SimState, rule: Literal["paper", "code"] | None = None) -> Tensor:
         """(N,) bool: a forbidden body touches the box under ``rule`` (default the params' rule)."""
         rule = rule or self.params.illegal_contact  # type: ignore[assignment]
         if rule == "off":
-            return torch.zeros(
-                state.num_envs, dtype=torch.bool, device=state.root_pos.device
-            )
+            return torch.zeros(state.num_envs, dtype=torch.bool, device=state.root_pos.device)
         touch = self.target_contact(state)
         forbidden = ~self.strike_mask.to(touch.device)
         if rule == "code":
             forbidden = forbidden & ~self._allowed.to(touch.device)
             if state.contact_forces.numel():
-                strong = (
-                    state.contact_forces.abs() > self.params.contact_force_threshold
-                ).any(-1)
+                strong = (state.contact_forces.abs() > self.params.contact_force_threshold).any(-1)
                 touch = touch & strong
         return (touch & forbidden).any(-1)
 
@@ -327,11 +311,7 @@ class StrikeTask(TaskBase, Task):
         self.illegal |= illegal_paper.to(self.device)
         out = self._fallen(state)
         if self.params.illegal_contact != "off":
-            rule_hit = (
-                illegal_paper
-                if self.params.illegal_contact == "paper"
-                else self.illegal_contact(state, "code")
-            )
+            rule_hit = illegal_paper if self.params.illegal_contact == "paper" else self.illegal_contact(state, "code")
             out = out | rule_hit.to(out.device)
         return out
 
@@ -358,6 +338,4 @@ def make_strike(
     **_: Any,
 ) -> StrikeTask:
     """Registry factory of the ``strike`` task."""
-    return StrikeTask(
-        params, skeleton=skeleton, num_envs=num_envs, device=device, seed=seed
-    )
+    return StrikeTask(params, skeleton=skeleton, num_envs=num_envs, device=device, seed=seed)

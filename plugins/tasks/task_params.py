@@ -76,20 +76,14 @@ class SpeedParams(BaseModel):
         ge=0.0,
         description="weight of the squared tangential speed ([CODE] tangent_err_w 0.1)",
     )
-    termination: FallParams = Field(
-        default_factory=FallParams, description="fall termination"
-    )
+    termination: FallParams = Field(default_factory=FallParams, description="fall termination")
 
     @model_validator(mode="after")
     def _ranges(self) -> SpeedParams:
         if self.speed_range[0] > self.speed_range[1] or self.speed_range[0] < 0:
-            raise ValueError(
-                f"speed_range must be 0 <= min <= max, got {self.speed_range}"
-            )
+            raise ValueError(f"speed_range must be 0 <= min <= max, got {self.speed_range}")
         if self.change_steps[0] < 1 or self.change_steps[0] > self.change_steps[1]:
-            raise ValueError(
-                f"change_steps must be 1 <= min <= max, got {self.change_steps}"
-            )
+            raise ValueError(f"change_steps must be 1 <= min <= max, got {self.change_steps}")
         return self
 
 
@@ -135,20 +129,14 @@ class ReachParams(BaseModel):
         gt=0.0,
         description="a goal counts as reached within this hand-target distance, m (metrics only; [DEFAULT], not in the papers)",
     )
-    termination: FallParams = Field(
-        default_factory=FallParams, description="fall termination"
-    )
+    termination: FallParams = Field(default_factory=FallParams, description="fall termination")
 
     @model_validator(mode="after")
     def _ranges(self) -> ReachParams:
         if self.height_range[0] > self.height_range[1]:
-            raise ValueError(
-                f"height_range must be min <= max, got {self.height_range}"
-            )
+            raise ValueError(f"height_range must be min <= max, got {self.height_range}")
         if self.change_steps[0] < 1 or self.change_steps[0] > self.change_steps[1]:
-            raise ValueError(
-                f"change_steps must be 1 <= min <= max, got {self.change_steps}"
-            )
+            raise ValueError(f"change_steps must be 1 <= min <= max, got {self.change_steps}")
         return self
 
 
@@ -212,20 +200,13 @@ class StrikeParams(BaseModel):
         gt=0.0,
         description="maximum distance of a 'near' box, m ([CODE] near_dist 1.5)",
     )
-    random_yaw: bool = Field(
-        True, description="uniform yaw of the box at reset ([CODE] yes; [P] not stated)"
-    )
+    random_yaw: bool = Field(True, description="uniform yaw of the box at reset ([CODE] yes; [P] not stated)")
     half_size: tuple[float, float, float] = Field(
         (0.2, 0.2, 0.9),
-        description="box half extents, m; it stands with its centre at half_size[2] ([CODE] centre height 0.9 m; the "
-        "horizontal size is [DEFAULT])",
+        description="box half extents, m; it stands with its centre at half_size[2] ([CODE] centre height 0.9 m; the horizontal size is [DEFAULT])",
     )
-    density: float = Field(
-        30.0, gt=0.0, description="box density, kg/m^3 ([CODE] asset density 30)"
-    )
-    friction: float = Field(
-        0.9, gt=0.0, description="box friction coefficient ([DEFAULT], the simulator's)"
-    )
+    density: float = Field(30.0, gt=0.0, description="box density, kg/m^3 ([CODE] asset density 30)")
+    friction: float = Field(0.9, gt=0.0, description="box friction coefficient ([DEFAULT], the simulator's)")
     strike_bodies: tuple[str, ...] | None = Field(
         None,
         description="bodies allowed to touch the box: default the right hand only ([P] 'any body other than the right "
@@ -236,9 +217,7 @@ class StrikeParams(BaseModel):
         description="terminate on a forbidden box contact: 'paper' = any non-strike body touches the box ([P]); 'code' = "
         "a non-strike, non-foot body touching it with a contact-force component > contact_force_threshold ([CODE]); 'off'",
     )
-    contact_force_threshold: float = Field(
-        50.0, ge=0.0, description="contact force for the 'code' rule, N ([CODE] 50)"
-    )
+    contact_force_threshold: float = Field(50.0, ge=0.0, description="contact force for the 'code' rule, N ([CODE] 50)")
     sixd: Literal["zhou", "tan_norm"] = Field(
         "tan_norm",
         description="6-D rotation of the box orientation ([CODE] quat_to_tan_norm; [P] unspecified)",
@@ -253,9 +232,7 @@ class StrikeParams(BaseModel):
         if not 0.0 < self.distance[0] <= self.distance[1]:
             raise ValueError(f"distance must be 0 < min <= max, got {self.distance}")
         if self.near_prob > 0 and self.near_max < self.distance[0]:
-            raise ValueError(
-                f"near_max ({self.near_max}) must be >= distance[0] ({self.distance[0]})"
-            )
+            raise ValueError(f"near_max ({self.near_max}) must be >= distance[0] ({self.distance[0]})")
         return self
 
 

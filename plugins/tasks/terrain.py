@@ -221,9 +221,7 @@ class TerrainTask(TaskBase, Task):
     # ------------------------------------------------------------------------ observation
     def observe(self, state: SimState) -> Tensor:
         p = self.params
-        t = self.progress.to(torch.float64)[:, None] * self.dt + p.sample_spacing * torch.arange(
-            p.num_samples, dtype=torch.float64, device=self.device
-        )
+        t = self.progress.to(torch.float64)[:, None] * self.dt + p.sample_spacing * torch.arange(p.num_samples, dtype=torch.float64, device=self.device)
         samples = trajectory_at(self.verts, self.seg_dt, t).to(state.root_pos)  # (N, S, 2)
         rel = samples - state.root_pos[:, None, :2]
         rel3 = torch.cat((rel, torch.zeros_like(rel[..., :1])), -1)
@@ -280,8 +278,6 @@ class TerrainTask(TaskBase, Task):
         return out
 
 
-def make_terrain(
-    params: TerrainTaskParams, *, skeleton: Skeleton, num_envs: int, device: Any = "cpu", seed: int | None = None, **_: Any
-) -> TerrainTask:
+def make_terrain(params: TerrainTaskParams, *, skeleton: Skeleton, num_envs: int, device: Any = "cpu", seed: int | None = None, **_: Any) -> TerrainTask:
     """Registry factory of the ``terrain`` task."""
     return TerrainTask(params, skeleton=skeleton, num_envs=num_envs, device=device, seed=seed)

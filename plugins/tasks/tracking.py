@@ -146,16 +146,11 @@ class TrackingTask(TaskBase, Task):
     #: body indices of ``tracked_error`` (None: not reported)
     tracked_bodies: Tensor | None = None
 
-    def _setup_tracking(
-        self, params: Any, skeleton: Skeleton, num_envs: int, device: Any, seed: int | None, motions: Any
-    ) -> None:
+    def _setup_tracking(self, params: Any, skeleton: Skeleton, num_envs: int, device: Any, seed: int | None, motions: Any) -> None:
         self.params = params
         self._setup(params.fall, skeleton, num_envs, device, params.seed if seed is None else seed)
         if motions is None:
-            raise ValueError(
-                f"task {type(self).__name__} follows a reference motion: build it with motions=<MotionLibrary> "
-                "(the task stage's env does)"
-            )
+            raise ValueError(f"task {type(self).__name__} follows a reference motion: build it with motions=<MotionLibrary> (the task stage's env does)")
         from mocap.motion.library import MotionLibrary
         from mocap.motion.sources import MotionSet
 
@@ -371,9 +366,7 @@ class HmdTrackingTask(TrackingTask):
         F, N = self.params.frames, self.num_envs
         t = torch.cat([self.reference_times(k) for k in range(1, F + 1)])
         frames = _like(self.library.frames(self.clip_ids.repeat(F), t), state)
-        refs = [
-            HumanoidState(**{k: v[i * N : (i + 1) * N] for k, v in vars(frames).items()}) for i in range(F)
-        ]
+        refs = [HumanoidState(**{k: v[i * N : (i + 1) * N] for k, v in vars(frames).items()}) for i in range(F)]
         self._remember(self.clip_ids, t[:N], refs[0])  # the next reward's frame
         return head_goal(state, refs, self.head)
 
@@ -430,24 +423,42 @@ class MotionTrackingTask(TrackingTask):
 
 # -------------------------------------------------------------------------------- factories
 def make_vr_tracking(
-    params: VrTrackingParams, *, skeleton: Skeleton, num_envs: int, device: Any = "cpu", seed: int | None = None,
-    motions: Any = None, **_: Any,
+    params: VrTrackingParams,
+    *,
+    skeleton: Skeleton,
+    num_envs: int,
+    device: Any = "cpu",
+    seed: int | None = None,
+    motions: Any = None,
+    **_: Any,
 ) -> VrTrackingTask:
     """Registry factory of ``vr_tracking`` (needs ``motions``: the motion library)."""
     return VrTrackingTask(params, skeleton=skeleton, num_envs=num_envs, device=device, seed=seed, motions=motions)
 
 
 def make_hmd_tracking(
-    params: HmdTrackingParams, *, skeleton: Skeleton, num_envs: int, device: Any = "cpu", seed: int | None = None,
-    motions: Any = None, **_: Any,
+    params: HmdTrackingParams,
+    *,
+    skeleton: Skeleton,
+    num_envs: int,
+    device: Any = "cpu",
+    seed: int | None = None,
+    motions: Any = None,
+    **_: Any,
 ) -> HmdTrackingTask:
     """Registry factory of ``hmd_tracking`` (needs ``motions``: the motion library)."""
     return HmdTrackingTask(params, skeleton=skeleton, num_envs=num_envs, device=device, seed=seed, motions=motions)
 
 
 def make_motion_tracking(
-    params: MotionTrackingParams, *, skeleton: Skeleton, num_envs: int, device: Any = "cpu", seed: int | None = None,
-    motions: Any = None, **_: Any,
+    params: MotionTrackingParams,
+    *,
+    skeleton: Skeleton,
+    num_envs: int,
+    device: Any = "cpu",
+    seed: int | None = None,
+    motions: Any = None,
+    **_: Any,
 ) -> MotionTrackingTask:
     """Registry factory of ``motion_tracking`` (needs ``motions``: the motion library)."""
     return MotionTrackingTask(params, skeleton=skeleton, num_envs=num_envs, device=device, seed=seed, motions=motions)

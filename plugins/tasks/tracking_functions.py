@@ -15,7 +15,6 @@ from mocap_tasks.tracking_params import HMD_SCALES, HMD_WEIGHTS, PHC_SCALES, PHC
 from torch import Tensor
 
 
-
 # ------------------------------------------------------------------------------ pure functions
 def select_bodies(state: HumanoidState, bodies: Sequence[int] | Tensor) -> HumanoidState:
     """``state`` with only the per-body fields of ``bodies`` (root pose and DoFs kept as they are),
@@ -86,9 +85,7 @@ def head_goal(state: HumanoidState, refs: Sequence[HumanoidState], head: int) ->
     return torch.cat(parts, dim=-1)
 
 
-def tracking_failed(
-    dist: Tensor, rule: Literal["mean", "any"], threshold: float, age: Tensor | None = None, grace: int = 0
-) -> Tensor:
+def tracking_failed(dist: Tensor, rule: Literal["mean", "any"], threshold: float, age: Tensor | None = None, grace: int = 0) -> Tensor:
     """(N,) bool from (N, K) distances to the reference: ``mean`` or ``any`` of them above ``threshold``,
     never while ``age`` (steps of the state since the reset) is at most ``grace``."""
     if rule == "mean":

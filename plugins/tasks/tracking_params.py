@@ -22,21 +22,14 @@ def _no_fall() -> FallParams:
     return FallParams(early_termination=False)
 
 
-_FALL_DESCRIPTION = (
-    "fall termination, off by default (imitation terminates on the tracking error only; a reference may lie on "
-    "the ground)"
-)
+_FALL_DESCRIPTION = "fall termination, off by default (imitation terminates on the tracking error only; a reference may lie on the ground)"
 
 
 class _TrackingParams(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
-    seed: int = Field(
-        0, description="seed of the task's generator (starts drawn without the env); a factory `seed` overrides it"
-    )
-    success_threshold: float = Field(
-        0.5, gt=0.0, description="m: an episode fails once the mean error of the success bodies exceeds it ([P] 0.5)"
-    )
+    seed: int = Field(0, description="seed of the task's generator (starts drawn without the env); a factory `seed` overrides it")
+    success_threshold: float = Field(0.5, gt=0.0, description="m: an episode fails once the mean error of the success bodies exceeds it ([P] 0.5)")
     fall: FallParams = Field(default_factory=_no_fall, description=_FALL_DESCRIPTION)
 
 
@@ -48,9 +41,7 @@ class VrTrackingParams(_TrackingParams):
         description="the tracked headset and controllers: (head, left hand, right hand) body names; None: the "
         "skeleton's (amp: head, left_hand, right_hand; smpl: Head, L_Hand, R_Hand)",
     )
-    goal: Literal["rot", "keypoint"] = Field(
-        "rot", description="per point: 'rot' = PULSE s^g-vr, 24 dims ([P], [CODE] 72 for 3 points); 'keypoint' = 9 dims"
-    )
+    goal: Literal["rot", "keypoint"] = Field("rot", description="per point: 'rot' = PULSE s^g-vr, 24 dims ([P], [CODE] 72 for 3 points); 'keypoint' = 9 dims")
     sixd: Literal["zhou", "tan_norm"] = Field("zhou", description="6-D rotation convention of the goal")
     reward_form: RewardForm = Field(
         "code",
@@ -61,9 +52,7 @@ class VrTrackingParams(_TrackingParams):
     reward_bodies: Literal["all", "tracked"] = Field(
         "all", description="bodies the reward scores: 'all' ([P] the same full-body reward as PHC+) or the 3 'tracked'"
     )
-    reward_weights: tuple[float, float, float, float] = Field(
-        PHC_WEIGHTS, description="(position, rotation, velocity, angular velocity) weights ([P] Table 4)"
-    )
+    reward_weights: tuple[float, float, float, float] = Field(PHC_WEIGHTS, description="(position, rotation, velocity, angular velocity) weights ([P] Table 4)")
     reward_scales: tuple[float, float, float, float] = Field(
         PHC_SCALES, description="(position, rotation, velocity, angular velocity) kernel scales k ([P] Table 4)"
     )
@@ -91,9 +80,7 @@ class HmdTrackingParams(_TrackingParams):
         HMD_WEIGHTS,
         description="(position, rotation, velocity, angular velocity) weights; [P] gives none (App. C.2); [DEFAULT], our choice",
     )
-    reward_scales: tuple[float, float, float, float] = Field(
-        HMD_SCALES, description="kernel scales k of exp(-k |d|^2) ([DEFAULT]: Eq. 10's 40, 2, 0.5, 0.1)"
-    )
+    reward_scales: tuple[float, float, float, float] = Field(HMD_SCALES, description="kernel scales k of exp(-k |d|^2) ([DEFAULT]: Eq. 10's 40, 2, 0.5, 0.1)")
     termination_threshold: float = Field(1.0, gt=0.0, description="m: head farther than this terminates ([P] 1 m)")
     episode_steps: int = Field(150, ge=1, description="time limit, control steps ([P] 5 s = 150)")
 
@@ -107,9 +94,7 @@ class HmdTrackingParams(_TrackingParams):
 class MotionTrackingParams(_TrackingParams):
     """Parameters of ``motion_tracking`` (module docstring)."""
 
-    goal: Literal["rot", "keypoint"] = Field(
-        "rot", description="imitation goal: 'rot' = PHC s^g-rot (24 B dims), 'keypoint' = s^g-kp (9 B)"
-    )
+    goal: Literal["rot", "keypoint"] = Field("rot", description="imitation goal: 'rot' = PHC s^g-rot (24 B dims), 'keypoint' = s^g-kp (9 B)")
     sixd: Literal["zhou", "tan_norm"] = Field("zhou", description="6-D rotation convention of the goal")
     reward_form: RewardForm = Field(
         "code",
@@ -129,9 +114,7 @@ class MotionTrackingParams(_TrackingParams):
         "'code' = any checked body > 0.25 m after the first step",
     )
     termination_threshold: float | None = Field(None, gt=0.0, description="m; None: 0.5 (paper) or 0.25 (code)")
-    termination_exclude: tuple[str, ...] | None = Field(
-        None, description="bodies not checked by the termination (None: the skeleton's feet, as PHC)"
-    )
+    termination_exclude: tuple[str, ...] | None = Field(None, description="bodies not checked by the termination (None: the skeleton's feet, as PHC)")
     episode_steps: int = Field(300, ge=1, description="time limit, control steps (10 s)")
 
     @model_validator(mode="after")
