@@ -209,14 +209,19 @@ def check_latent_space(latent: LatentSpace, obs: Observations, action_dim: int) 
     """A :class:`LatentSpace` on a batch ``obs`` (what its encoder, decoder and prior see): samples of
     (N, latent_dim); ``decode_action``'s (N, ``action_dim``) finite raw actions; a task action from its
     ``task_action_space`` mapped by ``to_latent`` to (N, latent_dim); ``random_action`` when it
-    ``samples_prior``; ``task_state_dict`` / ``load_task_state_dict`` round-trip."""
+    ``samples_prior``; ``task_state_dict`` / ``load_task_state_dict`` round-trip. A latent space with
+    ``has_encoder`` False (the ``scratch`` baseline) has no posterior to check: ``z`` is its prior's.
+    ``obs`` carries what the encoder reads beyond proprioception and goal in ``obs.extra`` (VMP: the
+    motion ``window``)."""
     N, Z = int(obs.proprio.shape[0]), int(latent.latent_dim)
     latent.eval()
     with torch.no_grad():
-        post = latent.encoder(obs)
-        _check_sample(post, N, Z, "LatentSpace.encoder")
         prior = latent.prior(obs)
         _check_sample(prior, N, Z, "LatentSpace.prior")
+        post = prior
+        if latent.has_encoder:
+            post = latent.encoder(obs)
+            _check_sample(post, N, Z, "LatentSpace.encoder")
         z = post.z if post.z is not None else post.mean
         action = latent.decode_action(obs, z)  # the raw decoder output (decoder() may need attach_imitator first)
         _shape(action, (N, action_dim), "LatentSpace.decode_action")
@@ -232,7 +237,8 @@ def check_latent_space(latent: LatentSpace, obs: Observations, action_dim: int) 
         zt = latent.to_latent(obs, task_action)
         _shape(zt, (N, Z), "LatentSpace.to_latent")
         _finite(zt, "LatentSpace.to_latent")
-        report = ["encoder, prior, decode_action", f"task action space {type(space).__name__}", "to_latent"]
+        checked = "encoder, prior, decode_action" if latent.has_encoder else "prior, decode_action (no encoder)"
+        report = [checked, f"task action space {type(space).__name__}", "to_latent"]
         if latent.samples_prior:
             ra = latent.random_action(obs, 1.0, g)
             _require(isinstance(ra, Tensor) and ra.shape[0] == N, "LatentSpace.random_action: expected N rows")

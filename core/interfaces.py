@@ -197,6 +197,10 @@ class LatentSpace(torch.nn.Module, ABC):
         return None
 
     # ------------------------------------------------ optional: what tasks, generation and eval use
+    #: the latent space has an encoder (a posterior over z); False for the ``scratch`` baseline, whose
+    #: task action is the PD target itself: the framework then never calls :meth:`encoder`, and
+    #: imitating through it (``LatentImitator``, ``mocap eval``) is refused with a clear error
+    has_encoder: bool = True
     #: the latent space has a prior that :meth:`random_action` samples (random generation, the
     #: ``generation`` task, ``mocap generate``); False for the no-latent ``scratch`` baseline
     samples_prior: ClassVar[bool] = False

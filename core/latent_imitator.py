@@ -51,6 +51,8 @@ class LatentImitator(Imitator):
     """
 
     def __init__(self, imitator: Imitator, latent: LatentSpace, device: torch.device | str | None = None):
+        if not latent.has_encoder:
+            raise ValueError(f"{type(latent).__name__} has no encoder (has_encoder False): there is no imitation through it to evaluate")
         self.imitator = imitator
         self.latent = latent
         if device is None:

@@ -71,6 +71,8 @@ STATE_FORMAT = "mocap.task_env/1"
 class ScratchLatent(LatentSpace):
     """No latent space: the task action is the normalized PD target (module docstring)."""
 
+    has_encoder = False  # nothing to encode: the framework never calls encoder()
+
     offset: Tensor  # buffers (register_buffer in __init__)
     scale: Tensor
 

@@ -95,3 +95,42 @@ def test_a_broken_task_is_named(amp):
     task.observe = lambda state: real(state)[:, :-1]  # type: ignore[method-assign]
     with pytest.raises(ContractViolation, match=r"Task.observe \(step 0\): expected shape \(4, 3\), got \(4, 2\)"):
         check_task(task, amp, num_envs=4)
+
+
+@pytest.mark.parametrize("name", ["pulse_amp_v2", "hybrid_rvq_amp", "vmp_amp_v2"])
+def test_committed_latent_spaces_load_through_their_factory_and_keep_the_contract(amp, name):
+    """Every latent-space plugin, as the framework builds it: its registered factory with the
+    committed checkpoint (the spec's params), then ``check_latent_space`` on observations built
+    the framework's way (VMP's encoder also reads a motion window of the bundled clips)."""
+    from pathlib import Path
+
+    import yaml
+
+    from mocap.motion.library import MotionLibrary
+    from mocap.observations import proprioception_and_goal
+
+    folder = Path(__file__).resolve().parents[1] / "checkpoints" / name
+    spec = yaml.safe_load((folder / "spec.yaml").read_text())
+    component = get_plugins().get("latent", spec["latent"]["name"])
+    latent = component.build(component.validate_params(spec["latent"].get("params")), skeleton=amp, checkpoint=folder / "latent.pt", device=torch.device("cpu"))
+    proprio, goal = proprioception_and_goal(fake_sim_state(amp, 6), fake_sim_state(amp, 6, seed=1))
+    extra = {}
+    if spec["latent"]["name"] == "vmp":
+        lib = MotionLibrary(get_plugins().get("motion_source", "deepmimic").build(None).load(amp), amp)
+        extra = {"window": latent.windows(lib, torch.arange(6) * 7 + 20)}
+    obs = Observations(proprio=proprio.float(), goal=goal.float(), extra=extra)
+    report = check_latent_space(latent, obs, amp.num_dofs)
+    assert report[0] == "encoder, prior, decode_action" and "task state round-trip" in report
+
+
+def test_scratch_keeps_the_contract_without_an_encoder(amp):
+    from mocap.observations import proprioception_and_goal
+
+    scratch = get_plugins().get("latent", "scratch").build(None, skeleton=amp, checkpoint=None, device=torch.device("cpu"))
+    proprio, goal = proprioception_and_goal(fake_sim_state(amp, 6), fake_sim_state(amp, 6, seed=1))
+    report = check_latent_space(scratch, Observations(proprio=proprio.float(), goal=goal.float(), extra={}), amp.num_dofs)
+    assert report[0] == "prior, decode_action (no encoder)"
+    from mocap.latent_imitator import LatentImitator
+
+    with pytest.raises(ValueError, match="has no encoder"):
+        LatentImitator(None, scratch)  # type: ignore[arg-type]
