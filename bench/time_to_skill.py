@@ -48,6 +48,16 @@ def _env_steps(path: Path) -> int:
     return int(ck.get("env_steps", 0))
 
 
+def _stop(child: subprocess.Popen) -> None:
+    """A clean stop of the training child (Ctrl-C: it saves its checkpoint), killed after 2 min."""
+    if child.poll() is None:
+        child.send_signal(signal.SIGINT)
+        try:
+            child.wait(timeout=120)
+        except subprocess.TimeoutExpired:
+            child.kill()
+
+
 def train(spec: Path, minutes: float, eval_every: float, checkpoint_every: int, work: Path, overrides: list[str]) -> list[dict]:
     """Run the spec for ``minutes``; return the snapshots taken (path, minute, env steps)."""
     out, store = work / "runs" / "tts", work / "runs" / "artifacts"
@@ -77,12 +87,7 @@ def train(spec: Path, minutes: float, eval_every: float, checkpoint_every: int, 
             if child.poll() is not None:
                 break
     finally:
-        if child.poll() is None:
-            child.send_signal(signal.SIGINT)
-            try:
-                child.wait(timeout=120)
-            except subprocess.TimeoutExpired:
-                child.kill()
+        _stop(child)
         log.close()
     return snaps
 
@@ -123,12 +128,7 @@ def train_steps(spec: Path, env_steps: int, snapshot_steps: int, checkpoint_ever
                 break
             time.sleep(5.0)
     finally:
-        if child.poll() is None:
-            child.send_signal(signal.SIGINT)
-            try:
-                child.wait(timeout=120)
-            except subprocess.TimeoutExpired:
-                child.kill()
+        _stop(child)
         log.close()
     if child.returncode not in (0, None):
         print(f"warning: the training child exited with {child.returncode}; see {work / 'train.log'}", flush=True)
