@@ -34,6 +34,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 
 def _newest_checkpoint(store: Path) -> Path | None:
@@ -48,6 +49,18 @@ def _env_steps(path: Path) -> int:
     return int(ck.get("env_steps", 0))
 
 
+def _start(spec: Path, work: Path, checkpoint_every: int, overrides: list[str]) -> tuple[subprocess.Popen, Any, float]:
+    """``mocap run`` of the spec in ``work/runs`` (no eval stage, checkpoints every ``checkpoint_every``
+    iterations, the ``--set`` overrides) as a child logging to ``work/train.log``: (child, log, start time)."""
+    out, store = work / "runs" / "tts", work / "runs" / "artifacts"
+    cmd = [sys.executable, "-m", "mocap", "run", str(spec), "--out", str(out), "--store", str(store), "--set", "eval=null"]
+    cmd += ["--set", f"imitator.trainer.params.checkpoint_every={checkpoint_every}"]
+    for o in overrides:
+        cmd += ["--set", o]
+    log = open(work / "train.log", "w")
+    return subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT), log, time.perf_counter()
+
+
 def _stop(child: subprocess.Popen) -> None:
     """A clean stop of the training child (Ctrl-C: it saves its checkpoint), killed after 2 min."""
     if child.poll() is None:
@@ -60,14 +73,8 @@ def _stop(child: subprocess.Popen) -> None:
 
 def train(spec: Path, minutes: float, eval_every: float, checkpoint_every: int, work: Path, overrides: list[str]) -> list[dict]:
     """Run the spec for ``minutes``; return the snapshots taken (path, minute, env steps)."""
-    out, store = work / "runs" / "tts", work / "runs" / "artifacts"
-    cmd = [sys.executable, "-m", "mocap", "run", str(spec), "--out", str(out), "--store", str(store), "--set", "eval=null"]
-    cmd += ["--set", f"imitator.trainer.params.checkpoint_every={checkpoint_every}"]
-    for o in overrides:
-        cmd += ["--set", o]
-    log = open(work / "train.log", "w")
-    t0 = time.perf_counter()
-    child = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)
+    store = work / "runs" / "artifacts"
+    child, log, t0 = _start(spec, work, checkpoint_every, overrides)
     snaps: list[dict] = []
     marks = [eval_every * (k + 1) for k in range(int(minutes / eval_every + 1e-9))]
     try:
@@ -95,15 +102,8 @@ def train(spec: Path, minutes: float, eval_every: float, checkpoint_every: int, 
 def train_steps(spec: Path, env_steps: int, snapshot_steps: int, checkpoint_every: int, work: Path, overrides: list[str]) -> list[dict]:
     """Run the spec for ``env_steps`` env steps; snapshot the newest checkpoint each time it passes a
     multiple of ``snapshot_steps`` (and at the end); return the snapshots (path, minute, env steps)."""
-    out, store = work / "runs" / "tts", work / "runs" / "artifacts"
-    cmd = [sys.executable, "-m", "mocap", "run", str(spec), "--out", str(out), "--store", str(store), "--set", "eval=null"]
-    cmd += ["--set", f"imitator.trainer.params.checkpoint_every={checkpoint_every}"]
-    cmd += ["--set", f"imitator.trainer.params.total_env_steps={env_steps}"]
-    for o in overrides:
-        cmd += ["--set", o]
-    log = open(work / "train.log", "w")
-    t0 = time.perf_counter()
-    child = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)
+    store = work / "runs" / "artifacts"
+    child, log, t0 = _start(spec, work, checkpoint_every, [f"imitator.trainer.params.total_env_steps={env_steps}", *overrides])
     snaps: list[dict] = []
     next_mark, seen_mtime = snapshot_steps, 0.0
     try:

@@ -57,6 +57,11 @@ class RewardTerms:
     def __call__(self, terms: Mapping[str, Tensor], unstable: Tensor | None = None) -> tuple[Tensor, dict[str, Tensor]]:
         """``(reward (N,) float64, info)``: the weighted sum of ``terms`` (which must name exactly
         the declared terms), 0 where ``unstable`` or not finite; ``info`` has ``reward/<name>``."""
+        return self.zero_invalid(self.weighted_sum(terms), unstable), self.info(terms)
+
+    def weighted_sum(self, terms: Mapping[str, Tensor]) -> Tensor:
+        """(N,) float64 ``sum_k w_k r_k`` in declaration order, before any zeroing (an env that ends
+        episodes on a non-finite reward reads it, then finishes with :meth:`zero_invalid`)."""
         if set(terms) != set(self.weights):
             missing, extra = sorted(set(self.weights) - set(terms)), sorted(set(terms) - set(self.weights))
             raise ValueError(f"reward terms do not match the declared ones (missing {missing}, undeclared {extra})")
@@ -66,12 +71,20 @@ class RewardTerms:
             part = v if w == 1.0 else w * v
             total = part if total is None else total + part
         assert total is not None, "RewardTerms needs at least one term"
-        total = total.double()
+        return total.double()
+
+    @staticmethod
+    def zero_invalid(total: Tensor, unstable: Tensor | None = None) -> Tensor:
+        """``total`` with 0 where it is not finite or ``unstable``."""
         bad = ~torch.isfinite(total)
         if unstable is not None:
             bad = bad | unstable.to(total.device).bool()
-        total = torch.where(bad, torch.zeros_like(total), total)
-        return total, {f"reward/{k}": v for k, v in terms.items()}
+        return torch.where(bad, torch.zeros_like(total), total)
+
+    @staticmethod
+    def info(terms: Mapping[str, Tensor]) -> dict[str, Tensor]:
+        """``reward/<name>``: every term's unweighted value, for the logs."""
+        return {f"reward/{k}": v for k, v in terms.items()}
 
 
 def check_term_names(given: Mapping[str, Any], known: Mapping[str, Any] | tuple[str, ...], owner: str) -> None:

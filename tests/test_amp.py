@@ -269,7 +269,7 @@ def test_episode_start_fill_and_stacking(amp, clips):
     assert torch.allclose(buf[:, 0], obs(env.sim.state), atol=1e-5)
     for k in range(1, H):
         t = env.start_time - k * dt
-        t = torch.where(env._loops[env.clip_ids], t, t.clamp_min(0.0))
+        t = torch.where(env.starts.loops[env.clip_ids], t, t.clamp_min(0.0))
         assert torch.allclose(buf[:, k], obs(env.library.frames(env.clip_ids, t)), atol=1e-4)
     prev = buf.clone()
     res = env.step(torch.zeros(4, amp.num_dofs))

@@ -30,6 +30,8 @@ def test_unstable_or_non_finite_steps_get_zero_reward():
     terms = {"a": torch.tensor([1.0, float("nan"), 2.0, 3.0]), "b": torch.tensor([1.0, 1.0, float("inf"), 1.0])}
     total, _ = RewardTerms({"a": 1.0, "b": 0.5})(terms, unstable=torch.tensor([False, False, False, True]))
     assert total.tolist() == [1.5, 0.0, 0.0, 0.0]
+    raw = RewardTerms({"a": 1.0, "b": 0.5}).weighted_sum(terms)  # before zeroing: what an env ends episodes on
+    assert raw[0] == 1.5 and raw[1].isnan() and raw[2].isinf() and raw[3] == 3.5
 
 
 def test_spec_overrides_replace_declared_weights_and_unknown_names_are_refused():

@@ -230,16 +230,6 @@ class ImitationEnv(ClipMining):
         """(N,) float64, summed reward of the current episodes (``book.returns``; read-only)."""
         return self.book.returns
 
-    @property
-    def _loops(self) -> Tensor:
-        """(C,) bool, looping clips (``starts.loops``)."""
-        return self.starts.loops
-
-    @property
-    def _durations(self) -> Tensor:
-        """(C,) float64 clip durations, s (``starts.durations``)."""
-        return self.starts.durations
-
     def _ref_at(self, ids: Tensor | None, steps_ahead: int, library: MotionLibrary | None = None) -> MotionFrames:
         c = self.clip_ids if ids is None else self.clip_ids[ids]
         t0 = self.start_time if ids is None else self.start_time[ids]

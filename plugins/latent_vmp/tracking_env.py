@@ -33,7 +33,6 @@ from mocap_vmp.tracking_reward import (
     update_counter,
     vmp_reward_terms,
     vmp_reward_weights,
-    weighted_total,
 )
 
 STATE_FORMAT = "mocap_vmp.tracking_env/1"
@@ -176,9 +175,9 @@ class VmpTrackingEnv:
         self.ee_counter, fired = update_counter(self.ee_counter, ee_err, p.termination_threshold, self.persist)
         unstable = state.unstable.to(self.device).bool() if state.unstable.numel() else torch.zeros(N, dtype=torch.bool, device=self.device)
         # a reward that is not finite (after the only_positive clip) marks the env unstable: it ends the episode
-        total = weighted_total(terms, self.rewards.weights)
+        total = self.rewards.weighted_sum(terms)
         unstable = unstable | ~torch.isfinite(total.clamp_min(0.0) if p.only_positive_rewards else total)
-        reward, reward_info = self.rewards(terms, unstable)  # (N,) float64, 0 where unstable or not finite
+        reward, reward_info = self.rewards.zero_invalid(total, unstable), self.rewards.info(terms)  # float64, 0 where unstable
         if p.only_positive_rewards:
             reward = reward.clamp_min(0.0)
         terminated, term_info = self.terminations({"ee": fired, "unstable": unstable})

@@ -105,19 +105,6 @@ def vmp_reward_terms(
     return terms
 
 
-def weighted_total(terms: dict[str, Tensor], weights: dict[str, float]) -> Tensor:
-    """``sum_k w_k r_k`` in the order of ``weights``, before any zeroing: the same operations as
-    :class:`mocap.episodes.RewardTerms` (which returns 0 where this is not finite; the tracking env
-    needs to know where, since a non-finite reward also ends the episode)."""
-    total: Tensor | None = None
-    for name, w in weights.items():
-        v = terms[name]
-        part = v if w == 1.0 else w * v
-        total = part if total is None else total + part
-    assert total is not None
-    return total
-
-
 # ------------------------------------------------------------------------------- termination
 def end_effector_error(ref_p: Tensor, sim_p: Tensor, norm: str = "max_euclidean") -> Tensor:
     """(N,) deviation of root-relative end-effector positions (N, 3E), metres."""
