@@ -123,6 +123,11 @@ class DistillTrainer(Trainer):
             teacher: Imitator = ctx.stage_component("imitator", checkpoint=upstream.checkpoint if upstream else None)
         except KeyError:
             raise DistillError("the distill trainer needs a teacher: add an `imitator:` section (a trained imitator or its checkpoint) to the spec") from None
+        if teacher.reference_steps != 1:
+            raise DistillError(
+                f"the teacher observes {teacher.reference_steps} reference frames (e.g. phc goal_frames > 1); "
+                "latent encoders read one goal frame, so distill from a one-frame imitator"
+            )
         if p.label == "pd_targets":
             teacher = PDTargetTeacher(teacher)
         student = ctx.stage_component("latent")

@@ -70,8 +70,9 @@ def rollout_imitation(
     unstable = torch.zeros(n, dtype=torch.bool)
     sim_pos[0], ref_pos[0], mask[0] = state.body_pos.float().cpu(), ref.body_pos.float().cpu(), True
     for k in range(1, T):
-        ref = lib.frames(clip_ids, zeros + k * dt)
-        seen = ref if observed is None else observed.frames(clip_ids, zeros + k * dt)
+        steps = imitator.reference_steps
+        ref = lib.frames_ahead(clip_ids, zeros + k * dt, dt, steps)
+        seen = ref if observed is None else observed.frames_ahead(clip_ids, zeros + k * dt, dt, steps)
         with torch.no_grad():
             actions = imitator.act(imitator.observe(state, seen))
         state = sim.step(actions)

@@ -131,7 +131,14 @@ class Imitator(ABC):
 
     @abstractmethod
     def observe(self, state: SimState, reference: MotionFrames) -> Observations:
-        """Build the imitator's observation from the simulated state and the next reference frames."""
+        """Build the imitator's observation from the simulated state and the next reference frames
+        (with ``reference.ahead`` holding the later ones when :attr:`reference_steps` > 1)."""
+
+    #: how many reference frames ``observe`` reads: the next control step's (t + 1) and
+    #: ``reference_steps - 1`` later ones in ``reference.ahead``. Whoever drives an imitator builds
+    #: its reference with :meth:`mocap.motion.library.MotionLibrary.frames_ahead` (a distillation
+    #: refuses a teacher with more than one: latent encoders observe one goal frame).
+    reference_steps: int = 1
 
     #: the trained policy network (a :class:`mocap.rl.networks.ActorCritic`) when the imitator has
     #: one: students distilled from it may copy its input statistics (``policy.obs_norm``)

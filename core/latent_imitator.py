@@ -53,6 +53,8 @@ class LatentImitator(Imitator):
     def __init__(self, imitator: Imitator, latent: LatentSpace, device: torch.device | str | None = None):
         if not latent.has_encoder:
             raise ValueError(f"{type(latent).__name__} has no encoder (has_encoder False): there is no imitation through it to evaluate")
+        if imitator.reference_steps != 1:
+            raise ValueError(f"the imitator observes {imitator.reference_steps} reference frames; a latent space's encoder reads one")
         self.imitator = imitator
         self.latent = latent
         if device is None:
@@ -94,6 +96,7 @@ class PDTargetTeacher(Imitator):
 
     def __init__(self, imitator: Imitator):
         self.imitator = imitator
+        self.reference_steps = imitator.reference_steps
 
     @property
     def policy(self) -> Any:  # type: ignore[override]

@@ -35,6 +35,7 @@ the rotation matrix, ``R e_x`` and ``R e_y``; ``"tan_norm"`` (PHC code) is the r
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Literal
 
 import torch
@@ -228,19 +229,25 @@ def imitation_goal_keypoint(state: HumanoidState, ref_next: HumanoidState) -> Te
 
 
 def proprioception_and_goal(
-    state: HumanoidState, ref_next: HumanoidState, kind: Literal["rot", "keypoint"] = "rot", sixd: SixD = "zhou"
+    state: HumanoidState,
+    ref_next: HumanoidState,
+    kind: Literal["rot", "keypoint"] = "rot",
+    sixd: SixD = "zhou",
+    ahead: Sequence[HumanoidState] = (),
 ) -> tuple[Tensor, Tensor]:
     """``(proprioception(state, sixd), imitation_goal(state, ref_next, kind, sixd))`` sharing the
-    heading rotation and the simulated bodies' rotation matrices (the policy input of every step)."""
+    heading rotation and the simulated bodies' rotation matrices (the policy input of every step).
+
+    ``ahead``: later reference frames; the goal is then ``[g(ref_next) | g(ahead[0]) | ...]``, each
+    block the same goal against the current simulated state (PHC code's ``fut_tracks`` option)."""
     _check_bodies(state)
+    if kind not in ("rot", "keypoint"):
+        raise ValueError(f"unknown imitation goal {kind!r}; choose 'rot' or 'keypoint'")
     rt = heading_inv_matrix_t(state.root_rot)
     sim_mat = quat_to_matrix(state.body_rot)
     proprio = _proprio_from(state, rt, sim_mat, sixd)
-    if kind == "rot":
-        return proprio, _goal_rot_from(state, ref_next, rt, sim_mat, sixd)
-    if kind == "keypoint":
-        return proprio, _goal_keypoint_from(state, ref_next, rt)
-    raise ValueError(f"unknown imitation goal {kind!r}; choose 'rot' or 'keypoint'")
+    goals = [_goal_rot_from(state, r, rt, sim_mat, sixd) if kind == "rot" else _goal_keypoint_from(state, r, rt) for r in (ref_next, *ahead)]
+    return proprio, goals[0] if len(goals) == 1 else torch.cat(goals, dim=-1)
 
 
 def imitation_goal(state: HumanoidState, ref_next: HumanoidState, kind: Literal["rot", "keypoint"] = "rot", sixd: SixD = "zhou") -> Tensor:

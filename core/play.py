@@ -238,7 +238,7 @@ class Player:
         # as mocap.imitation_eval.rollout_imitation: the reference of the step being taken, t = (k + 1) dt
         policy = self.loaded.policy
         t = torch.full((1,), (self.steps + 1) * self.dt, dtype=self.lib.dtype, device=self.lib.device)
-        self.ref = self.lib.frames(self.clip_ids, t)
+        self.ref = self.lib.frames_ahead(self.clip_ids, t, self.dt, policy.reference_steps)
         with torch.no_grad():
             actions = policy.act(policy.observe(self.state, self.ref))
         self.state = self.sim.step(actions)

@@ -92,10 +92,14 @@ class MotionFrames(HumanoidState):
     Attributes:
         clip_ids: (N,) long, index of the clip in the motion library.
         times: (N,) float, time within the clip, s (already wrapped for looping clips).
+        ahead: the same clips one, two, ... control steps later, for an imitator that observes
+            more than one reference frame (:attr:`mocap.interfaces.Imitator.reference_steps`;
+            :meth:`mocap.motion.library.MotionLibrary.frames_ahead`); empty otherwise.
     """
 
     clip_ids: Tensor = field(default_factory=lambda: torch.zeros(0, dtype=torch.long))
     times: Tensor = field(default_factory=lambda: torch.zeros(0))
+    ahead: tuple["MotionFrames", ...] = ()
 
 
 @dataclass
@@ -117,12 +121,16 @@ class Observations:
 
 
 def _take(value: object, ids: Tensor | slice) -> object:
+    if isinstance(value, tuple):  # MotionFrames.ahead
+        return tuple(v.index(ids) for v in value)
     if isinstance(value, Tensor) and value.dim() > 0 and value.numel() > 0:
         return value[ids]
     return value
 
 
 def _to(value: object, device: torch.device | str) -> object:
+    if isinstance(value, tuple):  # MotionFrames.ahead
+        return tuple(v.to(device) for v in value)
     return value.to(device) if isinstance(value, Tensor) else value
 
 

@@ -10,6 +10,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 from test_distill import walk  # noqa: F401  (fixture)
 
+from mocap.interfaces import Imitator
+from mocap.state import Observations
 from mocap_phc.recovery import FailStateParams, generate_fall_states
 from mocap_phc.recovery_eval import (
     RecoveryEvalParams,
@@ -60,17 +62,17 @@ def test_pick_clip():
         pick_clip(["getup", "kick"], [False, False], "spin")
 
 
-class HoldPose:
+class HoldPose(Imitator):
     """A stand-in policy: PD targets = the zero pose (it never gets up)."""
 
     def __init__(self, dofs: int):
         self.dofs = dofs
 
     def observe(self, state, ref):
-        return state.dof_pos
+        return Observations(proprio=state.dof_pos)
 
-    def act(self, obs):
-        return torch.zeros(obs.shape[0], self.dofs)
+    def act(self, obs, deterministic=True):
+        return torch.zeros(obs.proprio.shape[0], self.dofs)
 
 
 def test_fallen_states_are_valid(amp):

@@ -49,7 +49,7 @@ from __future__ import annotations
 import difflib
 import math
 from dataclasses import dataclass
-from typing import Literal, Sequence
+from typing import Any, Literal, Sequence
 
 import numpy as np
 import torch
@@ -402,6 +402,19 @@ class MotionLibrary:
             getattr(out, name)[miss] = getattr(exact, name)
         return out
 
+    def frames_ahead(self, clip_ids: Tensor, times: Tensor, dt: float, steps: int) -> MotionFrames:
+        """:meth:`frames` at ``times``, with ``ahead`` holding the frames ``dt``, ``2 dt``, ...
+        later (``steps`` frames in all): the reference an imitator with
+        ``reference_steps = steps`` observes. ``steps = 1``: plain :meth:`frames`."""
+        if steps < 1:
+            raise ValueError(f"steps must be >= 1, got {steps}")
+        t = torch.as_tensor(times, device=self.device).to(torch.float64).reshape(-1)
+        first = self.frames(clip_ids, t)
+        if steps == 1:
+            return first
+        first.ahead = tuple(self.frames(clip_ids, t + k * float(dt)) for k in range(1, steps))
+        return first
+
     def use_control_grid(self, dt: float | None, steps_past_end: int = 0, max_bytes: int = 512 * 2**20) -> bool:
         """Precompute every clip's frames at the grid times ``j dt`` (the control rate) so that
         :meth:`frames` at those times is a table lookup instead of interpolation and forward
@@ -559,7 +572,7 @@ class ControlGrid:
     def lookup(self, rows: Tensor, clip_ids: Tensor) -> MotionFrames:
         x = self.table.index_select(0, rows)
         n = x.shape[0]
-        out = {name: x[:, c : c + int(math.prod(shape))].view(n, *shape) for name, c, shape in self.layout}
+        out: dict[str, Any] = {name: x[:, c : c + int(math.prod(shape))].view(n, *shape) for name, c, shape in self.layout}
         return MotionFrames(**out, clip_ids=clip_ids)
 
 

@@ -291,31 +291,59 @@ def load_policy(path: Path, map_location: str | torch.device = "cpu") -> ActorCr
     return model.to(map_location).eval()
 
 
-def init_from_policy(model: ActorCritic, source: Path, log_std: float | None = None) -> None:
+def init_from_policy(model: ActorCritic, source: Path, log_std: float | None = None, repeat_tail: int | None = None) -> None:
     """Copy the weights and normalizers of the policy file ``source`` into ``model`` (a fresh network
     of the same architecture): PPO's ``init_policy`` (continue training a committed policy).
 
     ``log_std``: set the Gaussian head's ``log σ`` to this value instead of the source's (e.g. a
     fixed exploration σ). A policy of another architecture (observation or action size, hidden
     widths, normalizers) raises :class:`~mocap.checkpoint.CheckpointError` naming the tensors.
+
+    ``repeat_tail``: ``model`` may take more observation dims than the source, appended at the end as
+    repeats of the source's last ``repeat_tail`` dims (e.g. PHC's goal block with ``goal_frames`` > 1).
+    The appended inputs get the source's normalizer statistics of the block they repeat and zero
+    weights in the first layers, so the starting policy and value are exactly the source's.
     """
     source = Path(source)
     if not source.is_file():
         raise CheckpointError(f"{source}: init_policy does not exist")
     src = load_policy(source)
-    got = {k: tuple(v.shape) for k, v in src.state_dict().items() if isinstance(v, Tensor)}
+    state = src.state_dict()
+    if repeat_tail is not None and src.obs_dim != model.obs_dim:
+        state = _append_repeated_inputs(state, src.obs_dim, model.obs_dim, repeat_tail, source)
+    got = {k: tuple(v.shape) for k, v in state.items() if isinstance(v, Tensor)}
     want = {k: tuple(v.shape) for k, v in model.state_dict().items() if isinstance(v, Tensor)}
     if got != want:
         bad = sorted(k for k in set(got) | set(want) if got.get(k) != want.get(k))[:3]
         raise CheckpointError(
             f"{source}: init_policy does not fit this network (observation {model.obs_dim}, actions {model.action_dim}); differing tensors: {', '.join(bad)}"
         )
-    model.load_state_dict(src.state_dict())
+    model.load_state_dict(state)
     if log_std is not None:
         if model.log_std is None:
             raise CheckpointError(f"{source}: init log σ given, but the network has no Gaussian head")
         with torch.no_grad():
             model.log_std.fill_(float(log_std))
+
+
+def _append_repeated_inputs(state: dict[str, Any], old: int, new: int, tail: int, source: Path) -> dict[str, Any]:
+    """``state`` widened from ``old`` to ``new`` observation dims (:func:`init_from_policy`'s ``repeat_tail``)."""
+    extra = new - old
+    if not (0 < tail <= old and extra > 0 and extra % tail == 0):
+        raise CheckpointError(
+            f"{source}: init_policy_repeat_tail {tail} cannot widen the policy's {old} observation dims to {new} "
+            "(the new dims must be whole repeats of the last repeat_tail dims)"
+        )
+    reps = extra // tail
+    out: dict[str, Any] = {}
+    for key, value in state.items():
+        if key in ("obs_norm.mean", "obs_norm.var"):
+            out[key] = torch.cat([value, value[-tail:].repeat(reps)])
+        elif isinstance(value, Tensor) and value.dim() == 2 and value.shape[1] == old:  # a first layer
+            out[key] = torch.cat([value, value.new_zeros(value.shape[0], extra)], dim=1)
+        else:
+            out[key] = value
+    return out
 
 
 def export_policy(source: Path, destination: Path, extra: dict[str, Any] | None = None) -> None:

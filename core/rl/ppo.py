@@ -177,7 +177,7 @@ class PPOTrainer(Trainer):
         if fresh and self.init_model is not None:
             self.init_model(model)
         if fresh and p.init_policy is not None:
-            init_from_policy(model, p.init_policy, p.init_log_std)
+            init_from_policy(model, p.init_policy, p.init_log_std, p.init_policy_repeat_tail)
             ctx.console.print(f"ppo: starting from {p.init_policy}")
         parallel, world = dist.active(), dist.world_size()
         dist.broadcast_module(model)  # data-parallel: every rank starts from rank 0's weights

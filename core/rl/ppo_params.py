@@ -77,6 +77,14 @@ class PPOParams(BaseModel):
         description="start from this policy file's weights and normalizers instead of random ones (relative to the "
         "spec file; same architecture). Used only when the stage has no ppo.pt yet; the budget counts this stage's steps",
     )
+    init_policy_repeat_tail: int | None = Field(
+        None,
+        ge=1,
+        description="with init_policy: this network may take more observation dims than the policy, appended as repeats "
+        "of the policy's last init_policy_repeat_tail dims (PHC with goal_frames K > 1 from a one-frame policy: the "
+        "goal block, 24 x bodies for obs 'rot'); they start with zero weights and the repeated block's normalizer "
+        "statistics, so the first policy is the source's. None: the architectures must match",
+    )
     init_log_std: LogStd | None = Field(None, description="with init_policy: reset log σ to this value (e.g. a fixed σ); None keeps the policy's σ")
     init_lr: LearningRate | None = Field(
         1e-5,
@@ -94,6 +102,8 @@ class PPOParams(BaseModel):
             raise ValueError(f"minibatch_size {self.minibatch_size} exceeds the batch num_envs × horizon = {self.num_envs * self.horizon}")
         if self.init_log_std is not None and self.init_policy is None:
             raise ValueError("init_log_std needs init_policy (log_std_init sets the σ of a fresh network)")
+        if self.init_policy_repeat_tail is not None and self.init_policy is None:
+            raise ValueError("init_policy_repeat_tail needs init_policy")
         return self
 
     def start_lr(self, fresh: bool) -> float:

@@ -139,7 +139,7 @@ class ImitationEnv(ClipMining):
         self.num_envs = N = int(simulator.num_envs)
         self.device = lib.device
         self.dt = float(simulator.dt)
-        self.observation = PHCObservation(p.obs, p.sixd, p.recovery_goal)
+        self.observation = p.observation()
         self.action_map = ActionMap.for_skeleton(skeleton, p.action, p.action_clip, p.action_scale_overrides)
         self.action_space = self.action_map.space
         self.obs_dim = self.observation.dim(skeleton.num_bodies)
@@ -173,7 +173,7 @@ class ImitationEnv(ClipMining):
         self.book = EpisodeBook(N, dev)  # steps (progress) and returns of the current episodes
         self.failures = FailureTracker(lib, p)
         if p.control_grid:  # the reference at t0 + k dt becomes a table lookup (start times on the grid)
-            lib.use_control_grid(self.dt, p.episode_steps + 2)
+            lib.use_control_grid(self.dt, p.episode_steps + 1 + p.goal_frames)
         ss = p.start_sampling
         durations = lib.durations64.to(dev)
         self.start_sampler = AdaptiveStartSampler(durations, ss) if ss.mode == "adaptive" else None
@@ -251,6 +251,8 @@ class ImitationEnv(ClipMining):
         (clean) and what the policy saw of it (the noisy reference with ``reference_noise``)."""
         ref = self._ref_at(ids, 1)
         seen = ref if self.observed is None else self._ref_at(ids, 1, self.observed)
+        if self.params.goal_frames > 1:  # the later goal frames, as the policy sees them
+            seen = replace(seen, ahead=tuple(self._ref_at(ids, k, self.observed) for k in range(2, self.params.goal_frames + 1)))
         st = state if ids is None else state.index(ids)
         obs = PHCObservation.flatten(self.observation(st, seen))
         if ids is None:

@@ -28,18 +28,28 @@ class PHCObservation:
     goal: Literal["rot", "keypoint"] = "rot"
     sixd: Literal["zhou", "tan_norm"] = "zhou"
     recovery: Any = None  # RecoveryGoalParams: far from the reference, imitate its root only (mocap_phc.recovery)
+    frames: int = 1  # reference frames in the goal: t + 1 and frames - 1 later ones (ref_next.ahead)
 
     def dim(self, num_bodies: int) -> int:
-        return proprioception_dim(num_bodies) + imitation_goal_dim(num_bodies, self.goal)
+        return proprioception_dim(num_bodies) + self.frames * imitation_goal_dim(num_bodies, self.goal)
 
     def __call__(self, state: HumanoidState, ref_next: HumanoidState) -> Observations:
         extra: dict[str, Any] = {}
+        later: tuple[HumanoidState, ...] = ()
+        if self.frames > 1:
+            later = ref_next.ahead[: self.frames - 1] if isinstance(ref_next, MotionFrames) else ()
+            if len(later) != self.frames - 1:
+                raise ValueError(
+                    f"this imitator observes {self.frames} reference frames but got {1 + len(later)}: "
+                    "build the reference with MotionLibrary.frames_ahead(..., steps=imitator.reference_steps)"
+                )
         if self.recovery is not None:
             from mocap_phc.recovery import recovery_reference
 
             ref_next, far = recovery_reference(state, ref_next, self.recovery)
+            later = tuple(recovery_reference(state, r, self.recovery)[0] for r in later)
             extra["recovering"] = far
-        proprio, goal = proprioception_and_goal(state, ref_next, self.goal, self.sixd)
+        proprio, goal = proprioception_and_goal(state, ref_next, self.goal, self.sixd, later)
         # no per-step nan_to_num: simulators put an unstable env back to a finite state
         # (SimState.unstable), so the inputs here are finite
         return Observations(proprio=proprio.float(), goal=goal.float(), extra={"ref_dof_pos": ref_next.dof_pos, **extra})
@@ -62,6 +72,7 @@ class PolicyImitator(Imitator):
 
     def __init__(self, observation: PHCObservation, action_map: ActionMap, policy: Any = None, device: torch.device | str = "cpu"):
         self.observation = observation
+        self.reference_steps = observation.frames
         self.action_map = action_map
         self.policy = policy
         self.device = torch.device(device)

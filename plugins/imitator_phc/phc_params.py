@@ -92,6 +92,14 @@ class PHCParams(BaseModel):
         description="imitation goal: 'rot' = rotation + keypoint goal (24 per body, [P]/[C] obs_v 6) or "
         "'keypoint' = keypoints only (9 per body, [P] keypoint model, [C] obs_v 7)",
     )
+    goal_frames: int = Field(
+        1,
+        ge=1,
+        le=8,
+        description="reference frames in the imitation goal: the next one (t + 1) and goal_frames - 1 later ones, each a goal "
+        "block against the current state. [P] and the ICCV models of [C]: 1 (the paper names it a limitation); [C] option "
+        "fut_tracks (its PHC-Fut model) observes several; MimicKit's tracking env too",
+    )
     sixd: Literal["zhou", "tan_norm"] = Field(
         "zhou",
         description="6-D rotation features: 'zhou' = first two matrix columns ([P], Zhou et al.) or 'tan_norm' = rotated x and z axes ([C])",
@@ -271,7 +279,7 @@ class PHCParams(BaseModel):
     def observation(self) -> PHCObservation:
         from mocap_phc.env import PHCObservation
 
-        return PHCObservation(self.obs, self.sixd, self.recovery_goal)
+        return PHCObservation(self.obs, self.sixd, self.recovery_goal, self.goal_frames)
 
     def action_map(self, skeleton: Skeleton) -> ActionMap:
         from mocap_phc.env import ActionMap

@@ -37,6 +37,7 @@ from dataclasses import replace
 from typing import Any, Callable, Literal
 
 import torch
+from mocap.interfaces import Imitator
 from mocap_phc.recovery import FailStateParams, generate_fall_states, moved
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -93,11 +94,13 @@ def pick_still_frame(library: Any) -> tuple[int, float]:
     return best[1], best[2]
 
 
-def still_reference(library: Any, clip: int, time: float, n: int) -> Any:
-    """``n`` copies of clip ``clip``'s frame at ``time`` s with every velocity set to zero."""
+def still_reference(library: Any, clip: int, time: float, n: int, steps: int = 1) -> Any:
+    """``n`` copies of clip ``clip``'s frame at ``time`` s with every velocity set to zero; with
+    ``steps`` > 1 its ``ahead`` frames (``Imitator.reference_steps``) are the same still frame."""
     frame = library.frames(torch.full((n,), clip, dtype=torch.long), torch.full((n,), time, dtype=library.dtype, device=library.device))
     still = {k: torch.zeros_like(getattr(frame, k)) for k in ("root_lin_vel", "root_ang_vel", "dof_vel", "body_lin_vel", "body_ang_vel")}
-    return replace(frame, **still)
+    out = replace(frame, **still)
+    return replace(out, ahead=(out,) * (steps - 1)) if steps > 1 else out
 
 
 def recovery_summary(err: torch.Tensor, root_dist: torch.Tensor, dt: float, threshold: float) -> dict[str, Any]:
@@ -130,7 +133,7 @@ def best_trial(err: torch.Tensor, threshold: float) -> int:
 
 
 def evaluate_recovery(
-    policy: Any,
+    policy: Imitator,
     library: Any,
     make_sim: Callable[[int], Any],
     skeleton: Any,
@@ -158,7 +161,8 @@ def evaluate_recovery(
         dt = float(sim.dt)
         clip_ids = torch.full((n,), clip, dtype=torch.long)
         zeros = torch.zeros(n, dtype=library.dtype, device=library.device)
-        still = still_reference(library, clip, t_still, n) if p.reference == "still" else None
+        frames_seen = policy.reference_steps
+        still = still_reference(library, clip, t_still, n, frames_seen) if p.reference == "still" else None
         ref = still if still is not None else library.frames(clip_ids, zeros)
         shift = torch.zeros(n, 3, dtype=torch.float64)
         shift[:, :2] = ref.root_pos[:, :2].double().cpu() - fallen.root_pos[:, :2].double().cpu()
@@ -186,7 +190,7 @@ def evaluate_recovery(
 
         measure(state, ref)
         for k in range(1, steps + 1):
-            ref = still if still is not None else library.frames(clip_ids, zeros + k * dt)
+            ref = still if still is not None else library.frames_ahead(clip_ids, zeros + k * dt, dt, frames_seen)
             with torch.no_grad():
                 actions = policy.act(policy.observe(state, ref))
             state = sim.step(actions)
