@@ -48,6 +48,7 @@ def load_arm(name: str, result: Path, workdir: Path | None) -> dict[str, Any]:
     data = json.loads(result.read_text())
     arm: dict[str, Any] = {
         "name": name,
+        "spec": data.get("spec"),
         "overrides": data.get("overrides", []),
         "minutes": data.get("minutes"),
         "env_steps_budget": data.get("env_steps_budget"),
@@ -78,6 +79,14 @@ def _f(v: Any, fmt: str = ".1f") -> str:
     return "-" if v is None or (isinstance(v, float) and math.isnan(v)) else format(v, fmt)
 
 
+def _lever(arm: dict[str, Any], spec: str | None) -> str:
+    """What an arm changes: its own spec when it is not the table's, and its ``--set`` overrides
+    (without ``torch_threads``, which changes the speed, not the training)."""
+    parts = [f"spec {arm['spec']}"] if arm.get("spec") and arm["spec"] != spec else []
+    parts += [o for o in arm["overrides"] if "torch_threads=" not in o]
+    return "; ".join(parts) or "(the spec as is)"
+
+
 def render(result: dict[str, Any]) -> str:
     by_steps = all(arm.get("env_steps_budget") for arm in result["arms"])
     budget = (
@@ -89,7 +98,7 @@ def render(result: dict[str, Any]) -> str:
     lines = [
         f"# Imitator A/B: {result['spec']}",
         "",
-        f"Each arm: the spec plus one `--set` lever, trained for {budget} from the same start, "
+        f"Each arm: the spec plus one lever (a `--set` or a spec extending it), trained for {budget} from the same start, "
         "then evaluated with `mocap eval`'s protocol (15 clips, each once from its first frame). The last columns "
         "average the arm's last 20 PPO iterations: training episode length and success, learning rate and approx. KL.",
         "",
@@ -103,7 +112,7 @@ def render(result: dict[str, Any]) -> str:
     ]
     for arm in result["arms"]:
         tail = arm.get("training_last_20_iterations", {})
-        lever = "; ".join(arm["overrides"]) or "(the spec as is)"
+        lever = _lever(arm, result["spec"])
         load = arm.get("load_avg_at_end_of_training")
         for p in arm["points"]:
             lines.append(
@@ -112,6 +121,21 @@ def render(result: dict[str, Any]) -> str:
                 f"| {_f(tail.get('episode/success'), '.2f')} | {_f(tail.get('lr'), '.1e')} | {_f(tail.get('approx_kl'), '.3f')} "
                 f"| {_f(load[0] if load else None, '.2f')} |"
             )
+    lines += [
+        "",
+        "Over each arm's snapshots (mean, and the range): the evaluation moves by a clip or two between snapshots "
+        "of one run, so compare these rather than single points.",
+        "",
+        "| arm | lever | snapshots | clips tracked | MPJPE-g all (mm) |",
+        "|---|---|---|---|---|",
+    ]
+    for arm in result["arms"]:
+        clips = [p["clips_tracked"] for p in arm["points"]]
+        err = [p["mpjpe_g_all_mm"] for p in arm["points"] if p.get("mpjpe_g_all_mm") is not None]
+        lines.append(
+            f"| {arm['name']} | `{_lever(arm, result['spec'])}` | {len(clips)} | {sum(clips) / len(clips):.2f} ({min(clips)}-{max(clips)}) "
+            f"| {_f(sum(err) / len(err) if err else None)} ({_f(min(err) if err else None)}-{_f(max(err) if err else None)}) |"
+        )
     lines += ["", "Clips tracked at the end of each arm:", ""]
     for arm in result["arms"]:
         last = arm["points"][-1]

@@ -46,3 +46,20 @@ def test_arms_table_and_training_tail(ab, tmp_path: Path):
     assert "the same wall-clock budget" in md
     assert "Start: 9/15 clips, MPJPE-g 87.0 mm" in md
     assert out.with_suffix(".png").stat().st_size > 0
+
+
+def test_an_arm_with_its_own_spec_names_it_and_the_summary_averages_the_snapshots(ab, tmp_path: Path):
+    """An arm whose lever is a spec extending the table's is labelled with that spec; a thread-count
+    override is not a lever; the summary row is the mean (and range) over the arm's snapshots."""
+    base = tmp_path / "base.json"
+    point = {"minutes": 5.0, "env_steps": 500_000, "clips_total": 15, "mpjpe_g_succ_mm": 80.0, "tracked": ["walk"]}
+    pts = [point | {"clips_tracked": c, "mpjpe_g_all_mm": e} for c, e in ((9, 140.0), (11, 130.0), (10, 150.0))]
+    base.write_text(json.dumps({"spec": "s.yaml", "overrides": ["imitator.trainer.params.torch_threads=1"], "env_steps_budget": 1, "points": pts}))
+    other = tmp_path / "other.json"
+    other.write_text(json.dumps({"spec": "s_contacts.yaml", "overrides": ["seed=1"], "env_steps_budget": 1, "points": pts[:1]}))
+    out = tmp_path / "ab.json"
+    assert ab.main(["--arm", f"base={base}", "--arm", f"other={other}", "--out", str(out)]) == 0
+    md = out.with_suffix(".md").read_text()
+    assert "| base | `(the spec as is)` | 3 | 10.00 (9-11) | 140.0 (130.0-150.0) |" in md
+    assert "| other | `spec s_contacts.yaml; seed=1` | 1 | 9.00 (9-9) | 140.0 (140.0-140.0) |" in md
+    assert "# Imitator A/B: s.yaml" in md and "the same env-step budget" in md
