@@ -314,6 +314,23 @@ def test_non_looping_clip_truncates_at_its_end(amp, clips):
     env.close()
 
 
+@pytest.mark.parametrize("cycles", [None, 0.5, 1.0])
+def test_loop_cycles_ends_looping_episodes_after_that_many_periods(amp, clips, cycles):
+    """``loop_cycles``: an episode of a looping clip (walk, 1.27 s) is truncated, not failed, after
+    ceil(cycles * period / dt) steps whatever its start; None lets it loop until episode_steps."""
+    env = make_env(amp, clips, n=4, clip_names=["walk"], termination_threshold=100.0, hard_negative=False, episode_steps=60, loop_cycles=cycles)
+    env.reset()
+    period = float(env.library.durations64[0])
+    want = 60 if cycles is None else math.ceil(cycles * period / env.dt - 1e-6)
+    lengths: list[float] = []
+    for _ in range(70):
+        res = env.step(torch.zeros(4, amp.num_dofs))
+        assert not res.terminated.any()
+        lengths += res.episodes.get("length", torch.zeros(0)).tolist()
+    env.close()
+    assert lengths and set(lengths) == {float(want)}, (lengths, want)
+
+
 def test_state_dict_round_trip_reproduces_transitions(amp, clips):
     gen = torch.Generator().manual_seed(0)
     actions = [0.05 * torch.randn(8, amp.num_dofs, generator=gen) for _ in range(40)]

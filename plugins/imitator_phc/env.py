@@ -379,6 +379,9 @@ class ImitationEnv(ClipMining):
         reward_info["reward/imitation"] = r_im
         t_next = self.start_time + (self.book.steps + 1).to(torch.float64) * self.dt
         truncated = (self.book.steps >= p.episode_steps) | self.starts.clip_over(self.clip_ids, t_next)
+        if p.loop_cycles is not None:  # looping clips: the episode ends after loop_cycles periods
+            played = self.book.steps.to(torch.float64) * self.dt
+            truncated = truncated | (self.starts.loops[self.clip_ids] & (played >= p.loop_cycles * self.starts.durations[self.clip_ids] - 1e-6))
         err = torch.linalg.vector_norm(state.body_pos - ref.body_pos, dim=-1).mean(-1)
         info: dict[str, Any] = {
             **reward_info,

@@ -172,6 +172,14 @@ class PHCParams(BaseModel):
     )
     # ---------------------------------------------------------------------------- episodes
     episode_steps: int = Field(300, ge=1, description="time limit in control steps ([C] 300 = 10 s at 30 Hz); truncation, bootstrapped")
+    loop_cycles: float | None = Field(
+        None,
+        gt=0,
+        description="a training episode of a looping clip ends (truncated, bootstrapped: not a failure) after this many "
+        "periods of the clip from its start; None: it loops until episode_steps, as DeepMimic and MimicKit do with "
+        "their looping clips (PHC's AMASS clips do not loop). The evaluation plays each clip once "
+        "(bench/clip_failures.py: looping clips then fail almost every 10 s training episode on a later repeat)",
+    )
     start_sampling: StartSamplingParams = Field(
         default_factory=StartSamplingParams,
         description="where in a clip episodes start: 'uniform' (DeepMimic / PHC RSI) or 'adaptive' (failure-driven time bins, "
