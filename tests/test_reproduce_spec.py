@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from mocap.matrix import load_cells
 from mocap.pipeline import stage_keys
 from mocap.plugins import get_plugins
@@ -60,5 +62,22 @@ def test_pulse_v2_differs_from_the_pulse_recipe_only_by_its_teacher():
     assert Path(v1.imitator.checkpoint).parent.name == "imitator_amp"
     assert Path(v2.imitator.checkpoint).parent.name == "imitator_amp_v2"
     a, b = v1.imitator.model_dump(), v2.imitator.model_dump()
+    a.pop("checkpoint"), b.pop("checkpoint")
+    assert a == b
+
+
+@pytest.mark.parametrize("family", ["pulse", "hybrid_rvq"])
+def test_the_v4_latent_specs_differ_from_their_recipe_only_by_teacher_and_threads(family):
+    """specs/latent/<family>_amp_v4.yaml: the committed recipe with imitator_amp_v4 as the teacher and
+    2 torch threads (run alone), nothing else changed."""
+    plugins = get_plugins()
+    base = load_spec(ROOT / "specs" / "latent" / f"{family}_amp.yaml", plugins).spec
+    v4 = load_spec(ROOT / "specs" / "latent" / f"{family}_amp_v4.yaml", plugins).spec
+    assert Path(v4.imitator.checkpoint).parent.name == "imitator_amp_v4"
+    a, b = base.latent.model_dump(), v4.latent.model_dump()
+    assert (a["trainer"]["params"]["torch_threads"], b["trainer"]["params"]["torch_threads"]) == (1, 2)
+    b["trainer"]["params"]["torch_threads"] = 1
+    assert a == b
+    a, b = base.imitator.model_dump(), v4.imitator.model_dump()
     a.pop("checkpoint"), b.pop("checkpoint")
     assert a == b
