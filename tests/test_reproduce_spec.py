@@ -25,8 +25,10 @@ def test_reproduce_spec_trains_everything_and_shares_the_imitator():
     latents = {f"{r.spec.latent.name}_amp" for r in cells.values() if r.spec.latent is not None}
     # imitator _v2 and _v3: the same recipe trained further; vmp_amp: an earlier recipe, superseded by vmp_amp_v2;
     # vmp_amp_m: the M-conditioning ablation of the vmp cell; pulse_amp_v2: the pulse recipe with the
-    # _v2 imitator as the teacher (tests below); imitator _v4: _v3 continued by specs/imitator/continue_v3.yaml
-    covered = {"imitator_amp", "imitator_amp_v2", "imitator_amp_v3", "imitator_amp_v4", "vmp_amp_v2", "vmp_amp_m", "pulse_amp_v2"} | latents
+    # _v2 imitator as the teacher (tests below); imitator _v4: _v3 continued by specs/imitator/continue_v3.yaml;
+    # pulse_amp_v4: the pulse recipe with the _v4 imitator as the teacher (specs/latent/pulse_amp_v4.yaml, tested below)
+    covered = {"imitator_amp", "imitator_amp_v2", "imitator_amp_v3", "imitator_amp_v4", "vmp_amp_v2", "vmp_amp_m", "pulse_amp_v2", "pulse_amp_v4"}
+    covered |= latents
     assert committed <= covered, f"committed checkpoints without a cell: {committed - covered}"
     keys = {name: stage_keys(r.spec) for name, r in cells.items()}
     assert len({k["imitator"] for k in keys.values()}) == 1  # one imitator artifact for all cells
