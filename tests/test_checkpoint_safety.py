@@ -137,11 +137,18 @@ def test_committed_checkpoints_name_their_dependencies_by_relative_path():
     from mocap.eval_targets import load_evaluation_target
     from mocap.plugins import get_plugins
 
-    for f in sorted(REPO.glob("checkpoints/*/*.pt")):
-        doc = yaml.safe_load(load_checkpoint(f).get("spec") or "{}") or {}
+    inside = (REPO / "checkpoints").resolve()
+    specs = [(f, load_checkpoint(f).get("spec") or "{}") for f in sorted(REPO.glob("checkpoints/*/*.pt"))]
+    specs += [(f, f.read_text()) for f in sorted(REPO.glob("checkpoints/*/spec.yaml"))]
+    for f, text in specs:
+        doc = yaml.safe_load(text) or {}
         for stage in ("imitator", "latent", "task"):
             ck = (doc.get(stage) or {}).get("checkpoint")
             assert ck is None or not Path(ck).is_absolute(), (f, ck)
+            if ck is not None:  # relative to the checkpoint's folder, and inside the repository's checkpoints/
+                # (pulse_amp_v4 was first exported from another worktree and named ../../../dist/checkpoints/...)
+                resolved = (f.parent / ck).resolve()
+                assert resolved.is_relative_to(inside) and resolved.is_file(), (f, ck)
     target = load_evaluation_target(REPO / "checkpoints/pulse_amp_v2/latent.pt", get_plugins())
     assert Path(target.imitator_checkpoint).resolve() == (REPO / "checkpoints/imitator_amp_v2/policy.pt").resolve()
 
