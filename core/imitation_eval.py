@@ -69,8 +69,8 @@ def rollout_imitation(
     alive = torch.ones(n, dtype=torch.bool)
     unstable = torch.zeros(n, dtype=torch.bool)
     sim_pos[0], ref_pos[0], mask[0] = state.body_pos.float().cpu(), ref.body_pos.float().cpu(), True
+    steps = imitator.reference_steps  # reference frames the imitator observes (t + 1 and later)
     for k in range(1, T):
-        steps = imitator.reference_steps
         ref = lib.frames_ahead(clip_ids, zeros + k * dt, dt, steps)
         seen = ref if observed is None else observed.frames_ahead(clip_ids, zeros + k * dt, dt, steps)
         with torch.no_grad():
