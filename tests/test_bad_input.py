@@ -104,7 +104,7 @@ def test_phc_checkpoint_for_another_humanoid_names_both_sides(amp_policy, smpl):
     assert isinstance(exc.value, user_errors()) and str(amp_policy) in str(exc.value)
 
 
-@pytest.mark.parametrize("args", [["--clip", "nope"], ["--reference", "moving"], ["--video-trial", "7"], ["--video-trial", "worst"]])
+@pytest.mark.parametrize("args", [["--clip", "nope"], ["--reference", "moving"], ["--video-trial", "7"], ["--video-trial", "worst"], ["--planner", "teleport"]])
 def test_recover_with_a_bad_reference_is_one_line(amp_policy, args):
     line = assert_one_line_error(invoke(["recover", amp_policy, "--trials", "1", "--seconds", "0.1", *args]), args[1])
     assert ("walk" in line) == (args[0] == "--clip")  # an unknown clip lists the clips there are

@@ -59,6 +59,14 @@ def register_commands(app: Any) -> None:
             str, typer.Option("--video-trial", help="the trial --video shows: an index, or 'best' (the first to recover, else the closest)")
         ] = "0",
         imitator_only: Annotated[bool, typer.Option("--imitator-only", help="for a latent space: evaluate the imitator it was distilled from")] = False,
+        planner: Annotated[
+            str,
+            typer.Option(
+                "--planner",
+                help="'none': the imitator gets the protocol's reference (PHC Table 4); 'getup': when down it is given a get-up clip "
+                "aligned to how it lies, then walks back (mocap_phc.recovery_planner; not PHC's P(F))",
+            ),
+        ] = "none",
     ) -> None:
         """Recovery rate: from fallen (and far) states, the share that gets up and back within 0.5 m of the reference."""
         import json
@@ -69,6 +77,7 @@ def register_commands(app: Any) -> None:
         from mocap.eval_targets import build_evaluation_target, load_evaluation_target
         from mocap.plugins import get_plugins
         from mocap_phc.recovery_eval import RecoveryEvalParams, evaluate_recovery
+        from mocap_phc.recovery_planner import GetUpPlannerParams
 
         console = Console(stderr=True)
         plugins = get_plugins()
@@ -82,7 +91,10 @@ def register_commands(app: Any) -> None:
             raise UserError(f"--clip: no clip {clip!r} in the motion set (clips: {', '.join(loaded.library.clip_names)})")
         if video_trial != "best" and not (video_trial.isdigit() and int(video_trial) < trials):
             raise UserError(f"--video-trial must be 'best' or a trial index below --trials ({trials}), not {video_trial!r}")
-        params = RecoveryEvalParams(trials=trials, seconds=seconds, reference=reference, clip=clip, far_prob=far_prob, seed=seed)
+        if planner not in ("none", "getup"):
+            raise UserError(f"--planner must be 'none' or 'getup', not {planner!r}")
+        plan = GetUpPlannerParams() if planner == "getup" else None
+        params = RecoveryEvalParams(trials=trials, seconds=seconds, reference=reference, clip=clip, far_prob=far_prob, seed=seed, planner=plan)
         recorder = None
         if video is not None:
             probe = loaded.make_sim(1)
@@ -110,6 +122,7 @@ def register_commands(app: Any) -> None:
             f"root back within 0.5 m: {res['root_back_rate']:.1%}; time to recover {res['time_to_recover_s']:.2f} s; "
             f"reference: {res['clip']} "
             + (f"held at {res['reference_time_s']:.2f} s (standing still)" if res["reference"] == "still" else "played from its first frame")
+            + (f"; get-up planner: stood up {res['stood_up_rate']:.1%}" if plan is not None else "")
         )
         if json_out is not None:
             json_out.parent.mkdir(parents=True, exist_ok=True)

@@ -39,6 +39,7 @@ from typing import Any, Callable, Literal
 import torch
 from mocap.interfaces import Imitator
 from mocap_phc.recovery import FailStateParams, generate_fall_states, moved
+from mocap_phc.recovery_planner import GetUpPlanner, GetUpPlannerParams
 from pydantic import BaseModel, ConfigDict, Field
 
 PROTOCOL = "mocap-recovery-v2"  # v1: the moving walk clip as the reference (now reference="clip")
@@ -61,6 +62,11 @@ class RecoveryEvalParams(BaseModel):
     threshold: float = Field(0.5, gt=0, description="recovered: mean body error <= this, m ([P] 0.5 m)")
     fall: FailStateParams = Field(default_factory=FailStateParams, description="how the fallen states are made (drop height, settle steps, ...)")
     seed: int = Field(0, description="seed of the fallen states and far offsets")
+    planner: GetUpPlannerParams | None = Field(
+        None,
+        description="None: the imitator gets the protocol's reference (PHC Table 4); a get-up planner (mocap_phc.recovery_planner, "
+        "not PHC's P(F)): the imitator is given an aligned get-up clip when down and walks back; the metric still uses the protocol's reference",
+    )
 
 
 def pick_clip(names: list[str], loops: list[bool], wanted: str | None) -> int:
@@ -146,7 +152,7 @@ def evaluate_recovery(
     """Run the protocol (module docstring) with ``policy`` (``observe(state, ref)`` / ``act(obs)``).
 
     ``recorder`` (``add_frame(pose, ghost=pose)``) gets trial ``video_trial``'s rollout with the
-    reference as the ghost: a trial index, or ``"best"`` (:func:`best_trial`)."""
+    reference the imitator was given (the planner's, with one) as the ghost: a trial index, or ``"best"`` (:func:`best_trial`)."""
     p = params
     n = p.trials
     if p.reference == "still" and p.clip is None:
@@ -188,14 +194,19 @@ def evaluate_recovery(
             errs.append(torch.linalg.vector_norm(sp - rp, dim=-1).mean(-1))
             roots.append(torch.linalg.vector_norm(state.root_pos.double().cpu() - ref.root_pos.double().cpu(), dim=-1))
 
+        planner = GetUpPlanner(library, p.planner, n, dt, frames_seen) if p.planner is not None else None
+        standing = 0.8 * planner.standing if planner is not None else math.nan
+        stood = torch.zeros(n, dtype=torch.bool)
         measure(state, ref)
         for k in range(1, steps + 1):
             ref = still if still is not None else library.frames_ahead(clip_ids, zeros + k * dt, dt, frames_seen)
+            given = planner.reference(k, state, ref) if planner is not None else ref
             with torch.no_grad():
-                actions = policy.act(policy.observe(state, ref))
+                actions = policy.act(policy.observe(state, given))
             state = sim.step(actions)
             measure(state, ref)
-            keep(state, ref)
+            keep(state, given)
+            stood |= state.root_pos[:, 2].double().cpu() >= standing
             if progress is not None:
                 progress()
     finally:
@@ -228,8 +239,12 @@ def evaluate_recovery(
             "far_prob": p.far_prob,
             "far_range_m": list(p.far_range),
             "start_root_height_m": float(start.root_pos[:, 2].double().mean()),
+            "planner": None if p.planner is None else {"name": "getup", **p.planner.model_dump()},
         }
     )
+    if planner is not None:
+        out["stood_up_rate"] = float(stood.double().mean())  # root at least 0.8 x the standing height at some step
+        out.update(planner.stats())
     return out
 
 

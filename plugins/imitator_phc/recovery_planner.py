@@ -1,0 +1,259 @@
+"""A get-up planner: recovery from a fall by *tracking* a get-up clip, then walking back.
+
+Not PHC+'s P(F). PHC (Sec. 3.2) learns recovery as a primitive of its own, and its official code
+first trains that primitive to get up with an AMP reward alone (``humanoid_im_getup.py``); on these
+cores that phase learned nothing in 3M steps (``bench/results/pmcp_getup_from_v2``). An imitator
+that already tracks the motion set's get-up clips can get up instead by being *given* one, started
+where and how the humanoid lies. This planner rewrites the reference an imitator receives, per
+trial, in three modes:
+
+1. **get up**: when the root has been lower than ``fallen_ratio`` x the standing root height for
+   ``fallen_steps`` control steps (at once when a trial starts down), the get-up clip whose first
+   frame's root orientation is closest to the humanoid's, up to a turn about the vertical
+   (:func:`mocap.motion.transform.best_yaw`), is played from its start, turned by that angle and
+   moved so that its first root lies under the humanoid's root (:func:`~mocap.motion.transform.yaw_frames`);
+   when the clip ends before the humanoid is up (root at ``up_ratio`` x the standing height), its
+   last frame is held at rest, and a humanoid still down ``fallen_steps`` after that starts another;
+2. **approach** (with ``approach_clip``, default ``walk``): after the get-up, while the root is
+   farther than ``approach_distance`` from the reference's root, the looping approach clip is
+   played, its root placed at the humanoid's, facing the humanoid's heading turned toward the
+   reference (its direction of travel over the next second of the clip) by at most ``max_turn_deg``,
+   re-aimed every ``replan_steps`` steps (the clip's time runs on, so
+   the gait's phase is continuous); it starts at the time of the clip whose joint angles are closest
+   to the get-up's last frame, played slowly (``approach_start_rate``, velocities scaled alike) and
+   sped up to its own pace over ``approach_ramp_s``;
+3. **track**: the reference the planner was given.
+
+The planner is part of the *driver* (``mocap recover --planner getup``), not of the policy: the
+recovery metric is still measured against the protocol's reference, and a result obtained with it
+says so (``planner`` in the JSON).
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import math
+from dataclasses import fields, replace
+from typing import Any
+
+import torch
+from pydantic import BaseModel, ConfigDict, Field
+from torch import Tensor
+
+from mocap.motion.transform import match_first_frames, yaw_frames
+from mocap.rotations import heading_angle
+from mocap.state import HUMANOID_FIELDS, MotionFrames
+
+TRACK, GETUP, APPROACH = 0, 1, 2
+
+
+class GetUpPlannerParams(BaseModel):
+    """The get-up planner (module docstring)."""
+
+    model_config = ConfigDict(extra="forbid")
+    clips: list[str] = Field(default_factory=lambda: ["getup*"], min_length=1, description="get-up clips, as fnmatch patterns of clip names")
+    fallen_ratio: float = Field(0.5, gt=0, lt=1, description="fallen: root height below this x the standing root height")
+    up_ratio: float = Field(
+        0.8, gt=0, le=1, description="up: root height at least this x the standing root height; a get-up ends when its clip has ended and the humanoid is up"
+    )
+    fallen_steps: int = Field(
+        10, ge=1, description="control steps a trial must stay fallen before a new get-up starts (a trial that starts down starts at once)"
+    )
+    approach_clip: str | None = Field("walk", description="looping clip walked toward the reference after a get-up (None: no approach)")
+    approach_distance: float = Field(0.4, gt=0, description="the approach ends when the root is this close to the reference root, m")
+    approach_start_rate: float = Field(0.3, gt=0, le=1, description="the approach clip starts played at this rate (1: at its own speed)")
+    approach_ramp_s: float = Field(1.0, ge=0, description="seconds over which the approach's rate rises to 1 (0: no ramp)")
+    max_turn_deg: float = Field(
+        30.0, gt=0, le=180, description="at each re-aiming the clip faces the humanoid's heading turned toward the goal by at most this, deg"
+    )
+    replan_steps: int = Field(15, ge=1, description="control steps between two re-aimings of the approach clip")
+
+
+def standing_height(library: Any) -> float:
+    """The median first-frame root height over the clips: the height of a humanoid standing."""
+    n = int(library.num_clips)
+    f = library.frames(torch.arange(n), torch.zeros(n, dtype=library.dtype, device=library.device))
+    return float(f.root_pos[:, 2].double().median())
+
+
+def select(mask: Tensor, a: MotionFrames, b: MotionFrames) -> MotionFrames:
+    """Row-wise ``a if mask else b`` over every state field, ``clip_ids``, ``times`` and ``ahead``."""
+
+    def pick(x: Tensor, y: Tensor) -> Tensor:
+        m = mask.to(x.device).reshape(-1, *([1] * (x.dim() - 1)))
+        return torch.where(m, x, y.to(x))
+
+    kw: dict[str, Any] = {k: pick(getattr(a, k), getattr(b, k)) for k in HUMANOID_FIELDS}
+    kw["clip_ids"] = pick(a.clip_ids, b.clip_ids) if a.clip_ids.numel() and b.clip_ids.numel() else a.clip_ids
+    kw["times"] = pick(a.times, b.times) if a.times.numel() and b.times.numel() else a.times
+    kw["ahead"] = tuple(select(mask, x, y) for x, y in zip(a.ahead, b.ahead, strict=True))
+    return replace(a, **kw)
+
+
+class GetUpPlanner:
+    """Per-trial reference rewriting for ``n`` trials (module docstring). Call :meth:`reference`
+    once per control step ``k`` = 1, 2, ... with the simulated state before the step and the
+    reference the driver would give; it returns the reference to give the imitator instead."""
+
+    def __init__(self, library: Any, params: GetUpPlannerParams, n: int, dt: float, steps: int = 1):
+        names = list(library.clip_names)
+        self.getups = [i for i, name in enumerate(names) if any(fnmatch.fnmatchcase(name, pat) for pat in params.clips)]
+        if not self.getups:
+            raise ValueError(f"get-up planner: no clip matches {params.clips} (clips: {', '.join(names)})")
+        self.approach: int | None = None
+        if params.approach_clip is not None:
+            if params.approach_clip not in names:
+                raise ValueError(f"get-up planner: no approach clip {params.approach_clip!r} (clips: {', '.join(names)})")
+            self.approach = names.index(params.approach_clip)
+            if not bool(library.loops[self.approach]):
+                raise ValueError(f"get-up planner: the approach clip {params.approach_clip!r} must loop")
+            self._entry = self._entry_phases(library, self.approach)
+        self.lib, self.p, self.n, self.dt, self.steps = library, params, n, float(dt), int(steps)
+        #: root height of a standing humanoid (:func:`standing_height`) and the fallen threshold, m
+        self.standing = standing_height(library)
+        self.up_ratio = params.up_ratio
+        self.fallen_height = params.fallen_ratio * self.standing
+        zero = torch.zeros(len(self.getups), dtype=library.dtype, device=library.device)
+        self._first_rot = library.frames(torch.tensor(self.getups), zero).root_rot.double().cpu()
+        self.mode = torch.full((n,), TRACK, dtype=torch.long)
+        self.clip = torch.zeros(n, dtype=torch.long)
+        self.t0 = torch.zeros(n, dtype=torch.float64)  # clip time at the segment's step `k0`
+        self.k0 = torch.zeros(n, dtype=torch.long)
+        self.yaw = torch.zeros(n, dtype=torch.float64)
+        self.pivot = torch.zeros(n, 2, dtype=torch.float64)
+        self.target = torch.zeros(n, 2, dtype=torch.float64)
+        self.low = torch.zeros(n, dtype=torch.long)
+        self.aimed = torch.zeros(n, dtype=torch.long)  # the step the approach was last aimed at
+        #: how many get-ups each trial started
+        self.getups_started = torch.zeros(n, dtype=torch.long)
+
+    def _entry_phases(self, library: Any, approach: int) -> Tensor:
+        """(clips,) the approach clip's time whose joint angles are closest to each get-up clip's last
+        frame (on a 30 Hz grid of one cycle): the approach starts from the pose the get-up ends in."""
+        dur = float(library.durations[approach])
+        grid = torch.arange(0.0, dur, 1.0 / 30.0, dtype=torch.float64)
+        cyc = library.frames(torch.full((len(grid),), approach, dtype=torch.long), grid.to(library.dtype)).dof_pos.double().cpu()
+        out = torch.zeros(int(library.num_clips), dtype=torch.float64)
+        for c in self.getups:
+            end = library.frames(torch.tensor([c]), library.durations[c : c + 1].to(library.dtype)).dof_pos.double().cpu()
+            out[c] = grid[int(((cyc - end) ** 2).sum(-1).argmin())]
+        return out
+
+    def _warp(self, e: Tensor) -> tuple[Tensor, Tensor]:
+        """(clip time elapsed, rate) after ``e`` s of an approach: the rate rises linearly from
+        ``approach_start_rate`` to 1 over ``approach_ramp_s``, then stays 1."""
+        r0, ramp = self.p.approach_start_rate, self.p.approach_ramp_s
+        if ramp <= 0:
+            return e, torch.ones_like(e)
+        within = e.clamp(max=ramp)
+        tau = r0 * within + (1.0 - r0) * within**2 / (2.0 * ramp) + (e - ramp).clamp(min=0.0)
+        return tau, (r0 + (1.0 - r0) * within / ramp)
+
+    def _clip_time(self, k: int) -> Tensor:
+        e = (k - self.k0).double() * self.dt
+        tau, _ = self._warp(e)
+        return self.t0 + torch.where(self.mode == APPROACH, tau, e)
+
+    def _rate(self, k: int) -> Tensor:
+        _, rate = self._warp((k - self.k0).double() * self.dt)
+        return torch.where(self.mode == APPROACH, rate, torch.ones_like(rate))
+
+    def _start_getup(self, rows: Tensor, k: int, root_pos: Tensor, root_rot: Tensor) -> None:
+        clip, yaw, _ = match_first_frames(self._first_rot, torch.tensor(self.getups), root_rot[rows])
+        first = self.lib.frames(clip, torch.zeros(len(rows), dtype=self.lib.dtype, device=self.lib.device))
+        self.mode[rows] = GETUP
+        self.clip[rows] = clip
+        self.t0[rows] = 0.0
+        self.k0[rows] = k - 1  # the reference of step k is the clip one control step in
+        self.yaw[rows] = yaw
+        self.pivot[rows] = first.root_pos[:, :2].double().cpu()
+        self.target[rows] = root_pos[rows, :2]
+        self.getups_started[rows] += 1
+
+    def _aim(self, rows: Tensor, k: int, root_pos: Tensor, root_rot: Tensor, goal: Tensor, restart: Tensor) -> None:
+        """Point the approach clip from the humanoid's root toward ``goal`` (xy) for ``rows``;
+        ``restart`` rows start the clip from its beginning, the others keep its time running."""
+        assert self.approach is not None
+        t = torch.where(restart, self._entry[self.clip[rows]], self._clip_time(k)[rows])
+        clip = torch.full((len(rows),), self.approach, dtype=torch.long)
+        now = self.lib.frames(clip, t.to(self.lib.dtype))
+        later = self.lib.frames(clip, (t + 1.0).to(self.lib.dtype))  # the clip's travel direction over the next second
+        step = (later.root_pos[:, :2] - now.root_pos[:, :2]).double().cpu()
+        to_goal = goal[rows] - root_pos[rows, :2]
+        aim = torch.atan2(to_goal[:, 1], to_goal[:, 0]) - torch.atan2(step[:, 1], step[:, 0])  # the clip's travel toward the goal
+        face = heading_angle(root_rot[rows]) - heading_angle(now.root_rot.double().cpu())  # the clip facing the humanoid's way
+        turn = torch.atan2(torch.sin(aim - face), torch.cos(aim - face))
+        limit = math.radians(self.p.max_turn_deg)
+        self.mode[rows] = APPROACH
+        self.clip[rows] = self.approach
+        self.aimed[rows] = k
+        new = rows[restart]
+        self.t0[new] = t[restart] - self._warp(torch.full((len(new),), self.dt, dtype=torch.float64))[0]
+        self.k0[new] = k - 1
+        self.yaw[rows] = face + turn.clamp(-limit, limit)
+        self.pivot[rows] = now.root_pos[:, :2].double().cpu()
+        self.target[rows] = root_pos[rows, :2]
+
+    def reference(self, k: int, state: Any, given: MotionFrames) -> MotionFrames:
+        p = self.p
+        root_pos = state.root_pos.double().cpu()
+        root_rot = state.root_rot.double().cpu()
+        goal = given.root_pos[:, :2].double().cpu()
+        down = root_pos[:, 2] < self.fallen_height
+        self.low = torch.where(down, self.low + 1, torch.zeros_like(self.low))
+        dur = self.lib.durations.double().cpu()[self.clip]
+        # a get-up whose clip ended fallen_steps ago (its last frame held at rest since) with the humanoid still down
+        stuck = (self.mode == GETUP) & (self._clip_time(k) - dur >= p.fallen_steps * self.dt) & down
+        start = ((self.mode != GETUP) & ((self.low >= p.fallen_steps) | (down & (k == 1)))) | stuck
+        if bool(start.any()):
+            self._start_getup(start.nonzero().squeeze(-1), k, root_pos, root_rot)
+            dur = self.lib.durations.double().cpu()[self.clip]
+        up = root_pos[:, 2] >= self.up_ratio * self.standing
+        done = (self.mode == GETUP) & (self._clip_time(k) > dur) & up
+        far = torch.linalg.vector_norm(root_pos[:, :2] - goal, dim=-1) > p.approach_distance
+        if bool(done.any()):
+            walk = done & far if self.approach is not None else torch.zeros_like(done)
+            self.mode[done & ~walk] = TRACK
+            if bool(walk.any()):
+                rows = walk.nonzero().squeeze(-1)
+                self._aim(rows, k, root_pos, root_rot, goal, torch.ones(len(rows), dtype=torch.bool))
+        arrived = (self.mode == APPROACH) & ~far
+        self.mode[arrived] = TRACK
+        replan = (self.mode == APPROACH) & ((k - self.aimed) >= p.replan_steps)
+        if bool(replan.any()):
+            rows = replan.nonzero().squeeze(-1)
+            self._aim(rows, k, root_pos, root_rot, goal, torch.zeros(len(rows), dtype=torch.bool))
+        planned = self.mode != TRACK
+        if not bool(planned.any()):
+            return given
+        t = self._clip_time(k).clamp(min=0.0)
+        t = torch.where(self.mode == GETUP, torch.minimum(t, dur), t)
+        lib = self.lib
+        frames = lib.frames_ahead(self.clip.to(lib.device), t.to(lib.device, lib.dtype), self.dt, self.steps)
+        held = (self.mode == GETUP) & (self._clip_time(k) >= dur)
+        if bool(held.any()):  # the get-up's last frame, held at rest until the mode changes
+            frames = _scaled(frames, torch.where(held, 0.0, 1.0))
+        slow = (self.mode == APPROACH) & (self._rate(k) < 1.0)
+        if bool(slow.any()):  # an approach starting slowly: the clip's velocities at the rate it is played
+            frames = _scaled(frames, torch.where(slow, self._rate(k), 1.0))
+        frames = yaw_frames(frames, self.yaw, self.pivot, self.target)
+        return select(planned, frames, given)
+
+    def stats(self) -> dict[str, Any]:
+        return {
+            "getups_started_mean": float(self.getups_started.double().mean()),
+            "mode_at_end": {name: int((self.mode == m).sum()) for name, m in (("track", TRACK), ("getup", GETUP), ("approach", APPROACH))},
+        }
+
+
+def _scaled(frames: MotionFrames, rate: Tensor) -> MotionFrames:
+    """``frames`` with every velocity multiplied by ``rate`` (N,): a clip played at that rate (0: held at rest)."""
+    vel = {}
+    for f in fields(MotionFrames):
+        if f.name.endswith("_vel"):
+            x = getattr(frames, f.name)
+            vel[f.name] = x * rate.to(x).reshape(-1, *([1] * (x.dim() - 1)))
+    return replace(frames, **vel, ahead=tuple(_scaled(a, rate) for a in frames.ahead))
+
+
+__all__ = ["APPROACH", "GETUP", "TRACK", "GetUpPlanner", "GetUpPlannerParams", "select", "standing_height"]
