@@ -67,7 +67,7 @@ class DistillEpisodes:
         self.recovery_left[ids] = 0
         fs = self.params.fail_states
         if fs is not None and (fs.fall_init_prob > 0 or fs.far_init_prob > 0):
-            start, recovering = fail_starts(start, self._fall_pool, fs, self.gen)
+            start, recovering, _ = fail_starts(start, self._fall_pool, fs, self.gen)
             self.recovery_left[ids[recovering]] = int(fs.recovery_steps)
         self.sim.reset(ids, start)
 

@@ -87,10 +87,11 @@ def assign_rows(dst: HumanoidState, ids: Tensor, src: HumanoidState) -> None:
         getattr(dst, name)[ids] = getattr(src, name).to(getattr(dst, name))
 
 
-def fail_starts(start: HumanoidState, pool: HumanoidState | None, params: FailStateParams, generator: torch.Generator) -> tuple[HumanoidState, Tensor]:
+def fail_starts(start: HumanoidState, pool: HumanoidState | None, params: FailStateParams, generator: torch.Generator) -> tuple[HumanoidState, Tensor, Tensor]:
     """Replace some reference starts (rows of ``start``) by fallen states from ``pool`` (moved to the
     reference root's xy) or far ones (the reference moved ``far_init_range`` m in a random direction).
-    Returns the new start states and the (n,) bool mask of the rows that got a fallen or far start."""
+    Returns the new start states, the (n,) bool mask of the rows that got a fallen or far start, and
+    the mask of the fallen ones."""
     n = int(start.root_pos.shape[0])
     u = torch.rand(n, generator=generator, dtype=torch.float64)
     v = torch.rand(n, generator=generator, dtype=torch.float64)
@@ -116,7 +117,7 @@ def fail_starts(start: HumanoidState, pool: HumanoidState | None, params: FailSt
         dev, dt = state.root_pos.device, state.root_pos.dtype
         chosen = HumanoidState(**{f.name: getattr(chosen, f.name).to(dev, dt) for f in fields(HumanoidState)})
         assign_rows(state, rows, moved(chosen, shift.to(dev)))
-    return state, fall | far
+    return state, fall | far, fall
 
 
 __all__ = ["FailStateParams", "assign_rows", "fail_starts", "generate_fall_states", "moved"]

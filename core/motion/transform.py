@@ -9,13 +9,14 @@ lies or faces (the get-up planner of :mod:`mocap_phc.recovery_planner`).
   form, and the tilt that is left (the angle no rotation about z can remove);
 * :func:`match_first_frames`: of several clips, the one whose first frame lies the way the humanoid
   does (up to a turn about z), and that turn;
+* :func:`frames_at_rate`: the velocities of frames scaled, for a clip played faster or slower (or held);
 * :func:`yaw_frames`: the frames turned by ``yaw`` about the vertical through ``pivot`` and moved
   so that ``pivot`` lands on ``target`` (heights unchanged); joint angles are unchanged.
 """
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import fields, replace
 
 import torch
 from torch import Tensor
@@ -55,6 +56,16 @@ def match_first_frames(first_rot: Tensor, clips: Tensor, root_rot: Tensor) -> tu
     j = resid.argmin(-1)
     rows = torch.arange(n)
     return clips.to(torch.long)[j], yaw[rows, j], resid[rows, j]
+
+
+def frames_at_rate(frames: MotionFrames, rate: Tensor) -> MotionFrames:
+    """``frames`` with every velocity multiplied by ``rate`` (N,): the clip played at that rate (0: held at rest)."""
+    vel = {}
+    for f in fields(MotionFrames):
+        if f.name.endswith("_vel"):
+            x = getattr(frames, f.name)
+            vel[f.name] = x * rate.to(x).reshape(-1, *([1] * (x.dim() - 1)))
+    return replace(frames, **vel, ahead=tuple(frames_at_rate(a, rate) for a in frames.ahead))
 
 
 def yaw_frames(frames: MotionFrames, yaw: Tensor, pivot: Tensor, target: Tensor) -> MotionFrames:
@@ -102,4 +113,4 @@ def yaw_frames(frames: MotionFrames, yaw: Tensor, pivot: Tensor, target: Tensor)
     return out
 
 
-__all__ = ["best_yaw", "match_first_frames", "yaw_frames", "yaw_quat"]
+__all__ = ["best_yaw", "frames_at_rate", "match_first_frames", "yaw_frames", "yaw_quat"]

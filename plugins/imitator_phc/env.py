@@ -98,6 +98,7 @@ from mocap.sim_snapshot import load_sim_state, save_sim_state
 from mocap.state import HUMANOID_FIELDS, HumanoidState, MotionFrames, SimState
 from mocap_phc.amp import AMPHistory, AMPObservation, DiscriminatorTrainer, demo_windows, loss_config, window_frames
 from mocap.imitation_rewards import ImitationReward, energy_penalty
+from mocap_phc.env_getup import GetUpStarts
 from mocap_phc.env_mining import ClipMining, PolicyFn
 from mocap_phc.observation import PHCObservation, PolicyImitator
 from mocap_phc.phc_params import REWARD_TERMS
@@ -194,6 +195,7 @@ class ImitationEnv(ClipMining):
         fs = p.fail_states
         if fs is not None and fs.fall_init_prob > 0:
             self._fall_pool = generate_fall_states(self.sim, skeleton, fs.pool_size or N, fs, self._gen)
+        self.getup = GetUpStarts(lib, p.getup_starts, N) if p.getup_starts is not None else None
 
         self.amp_obs: AMPObservation | None = None
         self.amp_history: AMPHistory | None = None
@@ -234,7 +236,9 @@ class ImitationEnv(ClipMining):
         c = self.clip_ids if ids is None else self.clip_ids[ids]
         t0 = self.start_time if ids is None else self.start_time[ids]
         k = self.book.steps if ids is None else self.book.steps[ids]
-        return (library or self.library).frames(c, t0 + (k + steps_ahead).to(torch.float64) * self.dt)
+        t = t0 + (k + steps_ahead).to(torch.float64) * self.dt
+        frames = (library or self.library).frames(c, t)
+        return self.getup.apply(frames, ids, t) if self.getup is not None else frames
 
     def _draw_noise(self) -> None:
         """(Re)build the noisy observed library (``params.reference_noise``; draw ``_noise_draw``)."""
@@ -275,22 +279,28 @@ class ImitationEnv(ClipMining):
         start: HumanoidState = self.library.frames(clips, t0)
         self.recovery_left[ids] = 0
         fs = self.params.fail_states
+        fallen = torch.zeros(n, dtype=torch.bool)
         if fs is not None and (fs.fall_init_prob > 0 or fs.far_init_prob > 0):
-            start = self._fail_starts(ids, start, fs)
+            start, fallen = self._fail_starts(ids, start, fs)
+        if self.getup is not None:  # fallen starts track a get-up clip laid onto the humanoid (mocap_phc.env_getup)
+            rows = ids[fallen.to(ids.device)]
+            self.clip_ids[rows] = self.getup.start(ids, fallen, start).to(rows.device)
+            self.start_time[rows] = 0.0
         self.sim.reset(ids, start)
-        ref0 = self.library.frames(clips, t0)
+        ref0 = self._ref_at(ids, 0)
         self.root_dist[ids] = torch.linalg.vector_norm(
             ref0.root_pos.to(torch.float64) - self.sim.state.root_pos[ids].to(ref0.root_pos.device, torch.float64), dim=-1
         )
         if self.amp_history is not None:
-            self._amp_fill(ids, self.sim.state.index(ids), clips, t0)
+            self._amp_fill(ids, self.sim.state.index(ids), self.clip_ids[ids], self.start_time[ids])
 
-    def _fail_starts(self, ids: Tensor, start: HumanoidState, fs: Any) -> HumanoidState:
+    def _fail_starts(self, ids: Tensor, start: HumanoidState, fs: Any) -> tuple[HumanoidState, Tensor]:
         """Replace some RSI starts by fallen states (at the reference root's xy) or far ones
-        (:func:`mocap.fail_states.fail_starts`); those envs get a recovery window."""
-        state, recovering = fail_starts(start, self._fall_pool, fs, self._gen)
+        (:func:`mocap.fail_states.fail_starts`); those envs get a recovery window. Returns the
+        states and the (n,) mask of the fallen ones."""
+        state, recovering, fallen = fail_starts(start, self._fall_pool, fs, self._gen)
         self.recovery_left[ids[recovering]] = int(fs.recovery_steps)
-        return state
+        return state, fallen
 
     def _amp_fill(self, ids: Tensor, state: HumanoidState, clips: Tensor, t0: Tensor) -> None:
         """Episode-start AMP window of envs ``ids``: ``state`` newest, the reference before ``t0`` older."""
@@ -378,7 +388,10 @@ class ImitationEnv(ClipMining):
         # with the point term, reward/imitation stays the task reward it always logged (the point reward where far)
         reward_info["reward/imitation"] = r_im
         t_next = self.start_time + (self.book.steps + 1).to(torch.float64) * self.dt
-        truncated = (self.book.steps >= p.episode_steps) | self.starts.clip_over(self.clip_ids, t_next)
+        over = self.starts.clip_over(self.clip_ids, t_next)
+        if self.getup is not None:  # a get-up episode ends after its clip plus the hold
+            over = self.getup.over(self.clip_ids, t_next, over)
+        truncated = (self.book.steps >= p.episode_steps) | over
         if p.loop_cycles is not None:  # looping clips: the episode ends after loop_cycles periods
             played = self.book.steps.to(torch.float64) * self.dt
             truncated = truncated | (self.starts.loops[self.clip_ids] & (played >= p.loop_cycles * self.starts.durations[self.clip_ids] - 1e-6))
@@ -406,7 +419,11 @@ class ImitationEnv(ClipMining):
 
     def _episodes_finished(self, ids: Tensor, failed: Tensor) -> None:
         """``EpisodeBook.conclude``'s hook before envs ``ids`` are reset: per-clip failure counts (hard
-        negatives) and, with adaptive starts, the clip times at which the ``failed`` ones failed."""
+        negatives) and, with adaptive starts, the clip times at which the ``failed`` ones failed
+        (get-up episodes from fallen starts are left out: mocap_phc.env_getup)."""
+        if self.getup is not None:
+            keep = ~self.getup.active[ids.cpu()].to(ids.device)
+            ids, failed = ids[keep], failed[keep]
         self._record(self.clip_ids[ids].cpu(), failed.cpu())
         if self.start_sampler is not None:
             bad = ids[failed]
@@ -465,6 +482,7 @@ class ImitationEnv(ClipMining):
             "noise_due": self._noise_due,
             **(self.start_sampler.state_dict() if self.start_sampler is not None else {}),
             **self.failures.state_dict(),
+            **(self.getup.state_dict() if self.getup is not None else {}),
         }
         if self.amp_trainer is not None:
             assert self.amp_history is not None
@@ -500,6 +518,8 @@ class ImitationEnv(ClipMining):
             self._noise_draw = int(state.get("noise_draw", 0))
             self._draw_noise()
         self.failures.load_state_dict(state)
+        if self.getup is not None:
+            self.getup.load_state_dict(state)
         if self.amp_trainer is not None:
             assert self.amp_history is not None
             if "amp" not in state:

@@ -33,14 +33,14 @@ from __future__ import annotations
 
 import fnmatch
 import math
-from dataclasses import fields, replace
+from dataclasses import replace
 from typing import Any
 
 import torch
 from pydantic import BaseModel, ConfigDict, Field
 from torch import Tensor
 
-from mocap.motion.transform import match_first_frames, yaw_frames
+from mocap.motion.transform import frames_at_rate, match_first_frames, yaw_frames
 from mocap.rotations import heading_angle
 from mocap.state import HUMANOID_FIELDS, MotionFrames
 
@@ -232,10 +232,10 @@ class GetUpPlanner:
         frames = lib.frames_ahead(self.clip.to(lib.device), t.to(lib.device, lib.dtype), self.dt, self.steps)
         held = (self.mode == GETUP) & (self._clip_time(k) >= dur)
         if bool(held.any()):  # the get-up's last frame, held at rest until the mode changes
-            frames = _scaled(frames, torch.where(held, 0.0, 1.0))
+            frames = frames_at_rate(frames, torch.where(held, 0.0, 1.0))
         slow = (self.mode == APPROACH) & (self._rate(k) < 1.0)
         if bool(slow.any()):  # an approach starting slowly: the clip's velocities at the rate it is played
-            frames = _scaled(frames, torch.where(slow, self._rate(k), 1.0))
+            frames = frames_at_rate(frames, torch.where(slow, self._rate(k), 1.0))
         frames = yaw_frames(frames, self.yaw, self.pivot, self.target)
         return select(planned, frames, given)
 
@@ -244,16 +244,6 @@ class GetUpPlanner:
             "getups_started_mean": float(self.getups_started.double().mean()),
             "mode_at_end": {name: int((self.mode == m).sum()) for name, m in (("track", TRACK), ("getup", GETUP), ("approach", APPROACH))},
         }
-
-
-def _scaled(frames: MotionFrames, rate: Tensor) -> MotionFrames:
-    """``frames`` with every velocity multiplied by ``rate`` (N,): a clip played at that rate (0: held at rest)."""
-    vel = {}
-    for f in fields(MotionFrames):
-        if f.name.endswith("_vel"):
-            x = getattr(frames, f.name)
-            vel[f.name] = x * rate.to(x).reshape(-1, *([1] * (x.dim() - 1)))
-    return replace(frames, **vel, ahead=tuple(_scaled(a, rate) for a in frames.ahead))
 
 
 __all__ = ["APPROACH", "GETUP", "TRACK", "GetUpPlanner", "GetUpPlannerParams", "select", "standing_height"]

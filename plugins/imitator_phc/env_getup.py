@@ -1,0 +1,98 @@
+"""Fallen starts that track a get-up clip (``PHCParams.getup_starts``): the training side of
+:mod:`mocap_phc.recovery_planner`.
+
+PHC's fallen starts (Sec. 3.2; ``fail_states.fall_init_prob``) put a fallen humanoid under the
+reference of an ordinary RSI clip and let it recover within a grace window; PHC learns the get-up
+itself with a separate primitive (and its code with an AMP-only phase). With ``getup_starts`` a
+fallen start instead gets, as its reference, the get-up clip whose first frame lies the way the
+humanoid does (:func:`mocap.motion.transform.match_first_frames`), turned about the vertical and
+moved so that its first root lies under the humanoid's (:func:`mocap.motion.transform.yaw_frames`),
+played from its first frame: getting up becomes a tracking problem with a dense reward. After the
+clip's last frame the episode goes on for ``hold_s`` seconds with that frame held at rest (the
+humanoid has to stand still, as it must after a get-up in ``mocap recover``); then it is truncated.
+
+Such episodes do not count as failures or successes of their clip for hard-negative mining or the
+adaptive start sampler (they start from a state the clip does not contain).
+"""
+
+from __future__ import annotations
+
+import fnmatch
+from typing import Any
+
+import torch
+from torch import Tensor
+
+from mocap.motion.transform import frames_at_rate, match_first_frames, yaw_frames
+from mocap.state import HumanoidState, MotionFrames
+from mocap_phc.phc_params import GetUpStartParams
+
+
+class GetUpStarts:
+    """Per-env alignment of get-up references for ``n`` envs on ``library`` (module docstring)."""
+
+    def __init__(self, library: Any, params: GetUpStartParams, n: int):
+        names = list(library.clip_names)
+        self.clips = torch.tensor([i for i, name in enumerate(names) if any(fnmatch.fnmatchcase(name, pat) for pat in params.clips)], dtype=torch.long)
+        if not len(self.clips):
+            raise ValueError(f"phc.getup_starts: no clip matches {params.clips} (clips: {', '.join(names)})")
+        self.lib, self.hold_s = library, float(params.hold_s)
+        zero = torch.zeros(len(self.clips), dtype=library.dtype, device=library.device)
+        first = library.frames(self.clips.to(library.device), zero)
+        self._first_rot = first.root_rot.double().cpu()
+        self._first_xy = first.root_pos[:, :2].double().cpu()
+        self.active = torch.zeros(n, dtype=torch.bool)
+        self.yaw = torch.zeros(n, dtype=torch.float64)
+        self.pivot = torch.zeros(n, 2, dtype=torch.float64)
+        self.target = torch.zeros(n, 2, dtype=torch.float64)
+
+    def start(self, ids: Tensor, fallen: Tensor, state: HumanoidState) -> Tensor:
+        """Envs ``ids`` (K,) start now; the ``fallen`` (K,) ones, in ``state`` (K rows), get a get-up
+        reference. Returns the (F,) get-up clip of each fallen one (its start time is 0)."""
+        ids = ids.cpu()
+        self.active[ids] = False
+        rows = fallen.cpu().nonzero().squeeze(-1)
+        if not len(rows):
+            return torch.zeros(0, dtype=torch.long)
+        clip, yaw, _ = match_first_frames(self._first_rot, self.clips, state.root_rot[rows].double().cpu())
+        j = torch.searchsorted(self.clips, clip)
+        env = ids[rows]
+        self.active[env] = True
+        self.yaw[env] = yaw
+        self.pivot[env] = self._first_xy[j]
+        self.target[env] = state.root_pos[rows, :2].double().cpu()
+        return clip
+
+    def apply(self, frames: MotionFrames, ids: Tensor | None, times: Tensor) -> MotionFrames:
+        """Reference ``frames`` of envs ``ids`` (all when None) at clip ``times``: the get-up envs'
+        rows turned and moved onto where their humanoid lay, held at rest past the clip's end."""
+        act = self.active if ids is None else self.active[ids.cpu()]
+        if not bool(act.any()):
+            return frames
+        sel = slice(None) if ids is None else ids.cpu()
+        dur = self.lib.durations.double().cpu()[frames.clip_ids.cpu()]
+        rest = act & (times.double().cpu() >= dur - 1e-9)
+        if bool(rest.any()):
+            frames = frames_at_rate(frames, (~rest).double())
+        yaw = torch.where(act, self.yaw[sel], torch.zeros_like(self.yaw[sel]))
+        pivot, target = self.pivot[sel], torch.where(act[:, None], self.target[sel], self.pivot[sel])
+        return yaw_frames(frames, yaw, pivot, target)
+
+    def over(self, clip_ids: Tensor, t_next: Tensor, clip_over: Tensor) -> Tensor:
+        """(N,) bool, the episode has no reference left at ``t_next``: ``clip_over`` (the library's
+        test) for ordinary envs, past the get-up's end plus ``hold_s`` for get-up envs."""
+        dur = self.lib.durations.double().to(t_next.device)[clip_ids]
+        act = self.active.to(t_next.device)
+        return torch.where(act, t_next.double() > dur + self.hold_s + 1e-6, clip_over)
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"getup_starts": {k: getattr(self, k).clone() for k in ("active", "yaw", "pivot", "target")}}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        if "getup_starts" not in state:
+            raise ValueError("the saved env state has no get-up start state, but params.getup_starts is on")
+        for k, v in state["getup_starts"].items():
+            setattr(self, k, v.clone())
+
+
+__all__ = ["GetUpStartParams", "GetUpStarts"]
