@@ -17,6 +17,7 @@ from torch import Tensor
 
 from mocap.episodes import ReferenceStarts, TerminationTerms
 from mocap.fail_states import fail_starts, generate_fall_states
+from mocap.getup_starts import GetUpStarts
 from mocap.hard_negatives import FailureTracker
 from mocap.interfaces import Simulator
 from mocap.motion.library import MotionLibrary
@@ -53,6 +54,7 @@ class DistillEpisodes:
         self._fall_pool: HumanoidState | None = None
         if fs is not None and fs.fall_init_prob > 0:
             self._fall_pool = generate_fall_states(self.sim, lib.skeleton, fs.pool_size or N, fs, self.gen)
+        self.getup = GetUpStarts(lib, p.getup_starts, N) if p.getup_starts is not None else None
 
     # ----------------------------------------------------------------------------- resets
     def reset_envs(self, ids: Tensor) -> None:
@@ -67,8 +69,14 @@ class DistillEpisodes:
         self.recovery_left[ids] = 0
         fs = self.params.fail_states
         if fs is not None and (fs.fall_init_prob > 0 or fs.far_init_prob > 0):
-            start, recovering, _ = fail_starts(start, self._fall_pool, fs, self.gen)
+            start, recovering, fallen = fail_starts(start, self._fall_pool, fs, self.gen)
             self.recovery_left[ids[recovering]] = int(fs.recovery_steps)
+            if self.getup is not None:  # fallen starts track a get-up clip laid onto the humanoid (mocap.getup_starts)
+                rows = ids[fallen.to(ids.device)]
+                self.clip_ids[rows] = self.getup.start(ids, fallen, start).to(rows.device)
+                self.start_time[rows] = 0.0
+        elif self.getup is not None:
+            self.getup.start(ids, torch.zeros(n, dtype=torch.bool), start)
         self.sim.reset(ids, start)
 
     def reset_all(self) -> None:
@@ -76,7 +84,9 @@ class DistillEpisodes:
 
     def reference_next(self) -> MotionFrames:
         """The reference at the time the next step reaches (what ``observe`` gets)."""
-        return self.library.frames(self.clip_ids, self.start_time + (self.progress + 1).to(torch.float64) * self.dt)
+        t = self.start_time + (self.progress + 1).to(torch.float64) * self.dt
+        frames = self.library.frames(self.clip_ids, t)
+        return self.getup.apply(frames, None, t) if self.getup is not None else frames
 
     # ------------------------------------------------------------------------------- steps
     def after_step(self, state: SimState, ref: MotionFrames) -> dict[str, Tensor]:
@@ -99,12 +109,15 @@ class DistillEpisodes:
         terminated, _ = self.termination({"tracking": failed, "unstable": unstable})
         t_next = self.start_time + (self.progress + 1).to(torch.float64) * self.dt
         clip_over = self.starts.clip_over(self.clip_ids, t_next)
+        if self.getup is not None:  # a get-up episode ends after its clip plus the hold
+            clip_over = self.getup.over(self.clip_ids, t_next, clip_over)
         truncated = ((self.progress >= p.episode_steps) | clip_over) & ~terminated
         done = terminated | truncated
         length = self.progress.clone()
         if bool(done.any()):
             ids = done.nonzero().squeeze(-1)
-            self._record(self.clip_ids[ids].cpu(), terminated[ids].cpu())
+            mined = ids if self.getup is None else ids[~self.getup.active[ids.cpu()].to(ids.device)]  # get-ups are not mined
+            self._record(self.clip_ids[mined].cpu(), terminated[mined].cpu())
             self.reset_envs(ids)
         return {"error": torch.nan_to_num(err, nan=0.0), "terminated": terminated, "truncated": truncated, "length": length}
 
@@ -147,6 +160,7 @@ class DistillEpisodes:
             "progress": self.progress.cpu().clone(),
             "recovery_left": self.recovery_left.cpu().clone(),
             **self.failures.state_dict(),
+            **(self.getup.state_dict() if self.getup is not None else {}),
         }
         sd.update(save_sim_state(self.sim))
         return sd
@@ -164,6 +178,8 @@ class DistillEpisodes:
         if "recovery_left" in state:
             self.recovery_left = state["recovery_left"].to(dev).clone()
         self.failures.load_state_dict(state)
+        if self.getup is not None:
+            self.getup.load_state_dict(state)
         load_sim_state(self.sim, torch.arange(self.num_envs), state, dev)
 
 

@@ -9,7 +9,7 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from mocap.bounds import EnvCount, LearningRate, ThreadCount
-from mocap.fail_state_params import FailStateParams
+from mocap.fail_state_params import FailStateParams, GetUpStartParams, check_getup_starts
 
 
 # ---------------------------------------------------------------------------------- parameters
@@ -51,6 +51,12 @@ class DistillParams(BaseModel):
         "student (and PULSE's prior) sees get-up states: [CODE] PULSE distills with fallInitProb 0.1 and "
         "recoveryEpisodeProb 0.3 (fall_init_prob, recovery_episode_prob); [P] does not mention them; None: off",
     )
+    getup_starts: GetUpStartParams | None = Field(
+        None,
+        description="a fallen start (fail_states.fall_init_prob) is given the get-up clip that lies like the humanoid, laid onto it, "
+        "then its last frame held at rest (mocap.getup_starts), for a teacher trained with the phc imitator's getup_starts; "
+        "[I], not in PULSE. None: the RSI clip's reference",
+    )
     episode_steps: int = Field(300, ge=1, description="time limit in control steps ([CODE] 300 = 10 s at 30 Hz)")
     control_grid: bool = Field(
         True,
@@ -73,6 +79,7 @@ class DistillParams(BaseModel):
 
     @model_validator(mode="after")
     def _check(self) -> "DistillParams":
+        check_getup_starts(self.getup_starts, self.fail_states)
         if self.minibatch_envs > self.num_envs:
             raise ValueError(f"minibatch_envs {self.minibatch_envs} exceeds num_envs {self.num_envs}")
         for b in self.mixture_beta:

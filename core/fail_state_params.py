@@ -1,4 +1,4 @@
-"""The params of :mod:`mocap.fail_states` (re-exported there), torch-free so that the params of the
+"""The params of :mod:`mocap.fail_states` (re-exported there) and :mod:`mocap.getup_starts`, torch-free so that the params of the
 PHC imitator and of ``distill`` import without torch (``mocap validate``)."""
 
 from __future__ import annotations
@@ -30,4 +30,18 @@ class FailStateParams(BaseModel):
     drop_height: float = Field(1.2, gt=0.0, description="root height the humanoid is dropped from with a random orientation, m")
 
 
-__all__ = ["FailStateParams"]
+class GetUpStartParams(BaseModel):
+    """Fallen starts with a get-up clip as the reference (:mod:`mocap.getup_starts`)."""
+
+    model_config = ConfigDict(extra="forbid")
+    clips: list[str] = Field(default_factory=lambda: ["getup*"], min_length=1, description="the get-up clips, as fnmatch patterns of clip names")
+    hold_s: float = Field(2.0, ge=0.0, description="seconds the get-up's last frame is held at rest before the episode is truncated")
+
+
+def check_getup_starts(getup: GetUpStartParams | None, fail: FailStateParams | None) -> None:
+    """``getup_starts`` needs fallen starts to act on: a clear error otherwise."""
+    if getup is not None and (fail is None or fail.fall_init_prob <= 0):
+        raise ValueError("getup_starts needs fallen starts: set fail_states.fall_init_prob > 0")
+
+
+__all__ = ["FailStateParams", "GetUpStartParams", "check_getup_starts"]

@@ -1,4 +1,4 @@
-"""Fallen starts that track a get-up clip (``PHCParams.getup_starts``, ``mocap_phc.env_getup``): the
+"""Fallen starts that track a get-up clip (``PHCParams.getup_starts``, ``mocap.getup_starts``): the
 reference is the get-up clip that lies like the humanoid, laid onto it; its last frame is held at rest
 for ``hold_s``; those episodes stay out of the mining statistics; the env resumes exactly."""
 
@@ -17,7 +17,7 @@ from mocap_phc.recovery import FailStateParams
 def _env(amp, lib, n=3, hold_s=0.5, recovery_steps=1000, fall=1.0):
     from mocap_phc.env import ImitationEnv
     from mocap_phc.imitator import PHCParams
-    from mocap_phc.phc_params import GetUpStartParams
+    from mocap.fail_state_params import GetUpStartParams
     from mocap_sim_mujoco.simulator import MujocoSimulator
 
     params = PHCParams(
@@ -99,3 +99,46 @@ def test_get_up_starts_resume_exactly(amp, bundled):  # noqa: F811
     sd.pop("getup_starts")
     with pytest.raises(ValueError, match="no get-up start state"):
         b.load_state_dict(sd)
+
+
+def test_distillation_gives_fallen_starts_the_get_up_reference_too(amp, bundled):  # noqa: F811
+    """A latent space distilled from a teacher trained with getup_starts sees its get-ups the same way."""
+    from mocap.distill import DistillParams
+    from mocap.distill_episodes import DistillEpisodes
+    from mocap_sim_mujoco.simulator import MujocoSimulator
+
+    with pytest.raises(pydantic.ValidationError, match="getup_starts needs fallen starts"):
+        DistillParams(num_envs=4, minibatch_envs=4, getup_starts={})
+    fs = FailStateParams(fall_init_prob=1.0, recovery_steps=1000, settle_steps=40)
+
+    def make():
+        params = DistillParams(num_envs=3, minibatch_envs=3, fail_states=fs, getup_starts={"hold_s": 0.2}, control_grid=False)
+        return DistillEpisodes(params, bundled, MujocoSimulator(skeleton=amp, num_envs=3, seed=0), seed=0)
+
+    ep = make()
+    mined = []
+    ep._record = lambda clips, failed: mined.append(clips.clone())
+    ep.reset_all()
+    assert bool(ep.getup.active.all())
+    names = [bundled.clip_names[int(c)] for c in ep.clip_ids]
+    assert all(n.startswith("getup_") for n in names) and bool((ep.start_time == 0).all())
+    s = ep.sim.state
+    ref = ep.reference_next()  # one step into the clip laid onto the humanoid: its root is near the humanoid's
+    assert float(torch.linalg.vector_norm(ref.root_pos[:, :2].double() - s.root_pos[:, :2].double(), dim=-1).max()) < 0.1
+    hold = s.dof_pos.clone()
+    for _ in range(12):
+        ep.after_step(ep.sim.step(hold), ep.reference_next())
+    ep2 = make()
+    ep2.reset_all()
+    ep2.load_state_dict(ep.state_dict())
+    assert torch.equal(ep2.getup.active, ep.getup.active) and torch.equal(ep2.getup.target, ep.getup.target)
+    torch.testing.assert_close(ep2.reference_next().body_pos, ep.reference_next().body_pos)
+    dur = float(bundled.durations[int(ep.clip_ids[0])])
+    steps, ended = 12, False
+    while not ended:  # a get-up episode ends after its clip plus hold_s, and is not mined
+        out = ep.after_step(ep.sim.step(hold), ep.reference_next())
+        steps += 1
+        ended = bool(out["truncated"][0] | out["terminated"][0])
+        assert steps < 200
+    assert bool(out["truncated"][0]) and steps == pytest.approx((dur + 0.2) / ep.dt, abs=1.5)
+    assert all(len(c) == 0 for c in mined)

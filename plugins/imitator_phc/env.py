@@ -86,6 +86,7 @@ from torch import Tensor
 
 from mocap.episodes import EpisodeBook, ReferenceStarts, RewardTerms, TerminationTerms
 from mocap.fail_states import fail_starts, generate_fall_states
+from mocap.getup_starts import GetUpStarts
 from mocap.hard_negatives import FailureTracker
 from mocap.hard_negatives import failure_weights as hard_negative_weights
 from mocap.interfaces import Simulator
@@ -98,7 +99,6 @@ from mocap.sim_snapshot import load_sim_state, save_sim_state
 from mocap.state import HUMANOID_FIELDS, HumanoidState, MotionFrames, SimState
 from mocap_phc.amp import AMPHistory, AMPObservation, DiscriminatorTrainer, demo_windows, loss_config, window_frames
 from mocap.imitation_rewards import ImitationReward, energy_penalty
-from mocap_phc.env_getup import GetUpStarts
 from mocap_phc.env_mining import ClipMining, PolicyFn
 from mocap_phc.observation import PHCObservation, PolicyImitator
 from mocap_phc.phc_params import REWARD_TERMS
@@ -282,7 +282,7 @@ class ImitationEnv(ClipMining):
         fallen = torch.zeros(n, dtype=torch.bool)
         if fs is not None and (fs.fall_init_prob > 0 or fs.far_init_prob > 0):
             start, fallen = self._fail_starts(ids, start, fs)
-        if self.getup is not None:  # fallen starts track a get-up clip laid onto the humanoid (mocap_phc.env_getup)
+        if self.getup is not None:  # fallen starts track a get-up clip laid onto the humanoid (mocap.getup_starts)
             rows = ids[fallen.to(ids.device)]
             self.clip_ids[rows] = self.getup.start(ids, fallen, start).to(rows.device)
             self.start_time[rows] = 0.0
@@ -420,7 +420,7 @@ class ImitationEnv(ClipMining):
     def _episodes_finished(self, ids: Tensor, failed: Tensor) -> None:
         """``EpisodeBook.conclude``'s hook before envs ``ids`` are reset: per-clip failure counts (hard
         negatives) and, with adaptive starts, the clip times at which the ``failed`` ones failed
-        (get-up episodes from fallen starts are left out: mocap_phc.env_getup)."""
+        (get-up episodes from fallen starts are left out: mocap.getup_starts)."""
         if self.getup is not None:
             keep = ~self.getup.active[ids.cpu()].to(ids.device)
             ids, failed = ids[keep], failed[keep]

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from mocap.fail_state_params import FailStateParams
+from mocap.fail_state_params import FailStateParams, GetUpStartParams, check_getup_starts
 from mocap.imitation_reward_params import DEFAULT_SCALES, DEFAULT_WEIGHTS
 from mocap.noisy import NoiseLevel
 from mocap.start_sampling_params import StartSamplingParams
@@ -79,14 +79,6 @@ class ContactRules(BaseModel):
     )
     default: list[str] | None = Field(None, description="body-name globs of the clips no key matches; None: the skeleton's feet")
     fall_height: float | None = Field(None, gt=0.0, description="only count contacts of bodies below this height, m (None: every contact)")
-
-
-class GetUpStartParams(BaseModel):
-    """Fallen starts with a get-up clip as the reference (:mod:`mocap_phc.env_getup`)."""
-
-    model_config = ConfigDict(extra="forbid")
-    clips: list[str] = Field(default_factory=lambda: ["getup*"], min_length=1, description="the get-up clips, as fnmatch patterns of clip names")
-    hold_s: float = Field(2.0, ge=0.0, description="seconds the get-up's last frame is held at rest before the episode is truncated")
 
 
 class PHCParams(BaseModel):
@@ -207,7 +199,7 @@ class PHCParams(BaseModel):
     getup_starts: GetUpStartParams | None = Field(
         None,
         description="a fallen start (fail_states.fall_init_prob) tracks the get-up clip that lies like the humanoid, turned and moved onto it, "
-        "then holds its last frame at rest (mocap_phc.env_getup; [I], the training side of `mocap recover --planner getup`: PHC learns "
+        "then holds its last frame at rest (mocap.getup_starts; [I], the training side of `mocap recover --planner getup`: PHC learns "
         "the get-up with a primitive of its own, its code with an AMP-only phase). None: the RSI clip's reference (PHC)",
     )
     reference_noise: NoiseLevel | None = Field(
@@ -278,8 +270,7 @@ class PHCParams(BaseModel):
 
     @model_validator(mode="after")
     def _getup_starts_need_fallen_starts(self) -> "PHCParams":
-        if self.getup_starts is not None and (self.fail_states is None or self.fail_states.fall_init_prob <= 0):
-            raise ValueError("getup_starts needs fallen starts: set fail_states.fall_init_prob > 0")
+        check_getup_starts(self.getup_starts, self.fail_states)
         if self.getup_starts is not None and self.amp:
             raise ValueError("getup_starts with amp: the AMP window of a get-up start would be made from the wrong clip; use one or the other")
         return self

@@ -1,5 +1,5 @@
-"""Fallen starts that track a get-up clip (``PHCParams.getup_starts``): the training side of
-:mod:`mocap_phc.recovery_planner`.
+"""Fallen starts that track a get-up clip (``getup_starts`` of the PHC imitator's params and of
+``distill``): the training side of ``mocap recover --planner getup`` (:mod:`mocap_phc.recovery_planner`).
 
 PHC's fallen starts (Sec. 3.2; ``fail_states.fall_init_prob``) put a fallen humanoid under the
 reference of an ordinary RSI clip and let it recover within a grace window; PHC learns the get-up
@@ -12,7 +12,10 @@ clip's last frame the episode goes on for ``hold_s`` seconds with that frame hel
 humanoid has to stand still, as it must after a get-up in ``mocap recover``); then it is truncated.
 
 Such episodes do not count as failures or successes of their clip for hard-negative mining or the
-adaptive start sampler (they start from a state the clip does not contain).
+adaptive start sampler (they start from a state the clip does not contain). Used by the PHC
+imitation env (:mod:`mocap_phc.env`) and by the distillation episodes (:mod:`mocap.distill_episodes`),
+so that a latent space distilled from a teacher trained this way sees the get-ups with the
+reference its teacher learned them from.
 """
 
 from __future__ import annotations
@@ -24,8 +27,8 @@ import torch
 from torch import Tensor
 
 from mocap.motion.transform import frames_at_rate, match_first_frames, yaw_frames
+from mocap.fail_state_params import GetUpStartParams
 from mocap.state import HumanoidState, MotionFrames
-from mocap_phc.phc_params import GetUpStartParams
 
 
 class GetUpStarts:
@@ -35,7 +38,7 @@ class GetUpStarts:
         names = list(library.clip_names)
         self.clips = torch.tensor([i for i, name in enumerate(names) if any(fnmatch.fnmatchcase(name, pat) for pat in params.clips)], dtype=torch.long)
         if not len(self.clips):
-            raise ValueError(f"phc.getup_starts: no clip matches {params.clips} (clips: {', '.join(names)})")
+            raise ValueError(f"getup_starts: no clip matches {params.clips} (clips: {', '.join(names)})")
         self.lib, self.hold_s = library, float(params.hold_s)
         zero = torch.zeros(len(self.clips), dtype=library.dtype, device=library.device)
         first = library.frames(self.clips.to(library.device), zero)
