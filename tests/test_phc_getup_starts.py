@@ -14,7 +14,7 @@ from mocap.rotations import quat_angle_between
 from mocap_phc.recovery import FailStateParams
 
 
-def _env(amp, lib, n=3, hold_s=0.5, recovery_steps=1000, fall=1.0):
+def _env(amp, lib, n=3, hold_s=0.5, recovery_steps=1000, fall=1.0, grid=False):
     from mocap_phc.env import ImitationEnv
     from mocap_phc.imitator import PHCParams
     from mocap.fail_state_params import GetUpStartParams
@@ -25,7 +25,7 @@ def _env(amp, lib, n=3, hold_s=0.5, recovery_steps=1000, fall=1.0):
         fail_states=FailStateParams(fall_init_prob=fall, recovery_steps=recovery_steps, settle_steps=40),
         getup_starts=GetUpStartParams(hold_s=hold_s),
         eval_every=0,
-        control_grid=False,
+        control_grid=grid,
     )
     return ImitationEnv(params, amp, lib, MujocoSimulator(skeleton=amp, num_envs=n, seed=0), seed=5)
 
@@ -42,9 +42,10 @@ def test_getup_starts_need_fallen_starts_and_exclude_amp():
     assert PHCParams(getup_starts={"clips": ["getup_faceup"]}, fail_states={"fall_init_prob": 0.3}).getup_starts.hold_s == 2.0
 
 
-def test_a_fallen_start_tracks_the_get_up_clip_that_lies_like_it(amp, bundled):  # noqa: F811
+@pytest.mark.parametrize("grid", [False, True])
+def test_a_fallen_start_tracks_the_get_up_clip_that_lies_like_it(amp, bundled, grid):  # noqa: F811
     lib = bundled
-    env = _env(amp, lib)
+    env = _env(amp, lib, grid=grid)
     env.reset()
     s = env.sim.state
     names = [lib.clip_names[int(c)] for c in env.clip_ids]
