@@ -2,7 +2,7 @@
 
 Runs ``mocap recover TARGET --planner P --seed S --json ...`` (protocol ``mocap-recovery-v2``: 64
 fallen starts, half of them also 2-5 m away, 10 s, a standing-still reference) for every target,
-planner and seed, in child processes, and writes ``--out`` (JSON) and a markdown table next to it:
+planner and seed, in child processes (``--jobs`` at a time), and writes ``--out`` (JSON) and a markdown table next to it:
 per target and planner the recovery rate (mean and per seed), the near and far rates, the share
 that stood up (planner only), the share whose root came back, and the share still on the reference
 at the end. The load average goes in the JSON; the rates do not depend on it (the rollouts are
@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from concurrent.futures import ThreadPoolExecutor
 import os
 import subprocess
 import sys
@@ -73,6 +74,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--target", action="append", required=True, help="NAME=PATH, what `mocap recover` accepts (repeatable)")
     ap.add_argument("--planner", action="append", choices=["none", "getup"], help="repeatable (default: none and getup)")
     ap.add_argument("--seed", dest="seeds", action="append", type=int, help="repeatable (default: 0)")
+    ap.add_argument("--jobs", type=int, default=1, help="`mocap recover` processes at a time")
     ap.add_argument("--trials", type=int, default=64)
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--title", default="Recovery rate (mocap recover, protocol mocap-recovery-v2)")
@@ -87,10 +89,13 @@ def main(argv: list[str] | None = None) -> int:
     planners, seeds = args.planner or ["none", "getup"], args.seeds or [0]
     load_before = list(os.getloadavg())
     start = time.perf_counter()
+    jobs = [(name, path, planner, s) for name, path in targets for planner in planners for s in seeds]
+    with ThreadPoolExecutor(max_workers=max(1, args.jobs)) as pool:
+        done = list(pool.map(lambda j: run_one(j[1], j[2], j[3], args.trials, args.seconds), jobs))
     rows = []
     for name, path in targets:
         for planner in planners:
-            runs = [run_one(path, planner, s, args.trials, args.seconds) for s in seeds]
+            runs = [r for j, r in zip(jobs, done, strict=True) if j[0] == name and j[2] == planner]
             rows.append({"target": name, "path": path, "planner": planner, "runs": runs, "summary": summarize(runs)})
             print(f"{name} {planner}: recovery {rows[-1]['summary']['recovery_rate_per_seed']}", flush=True)
     result = {
