@@ -82,23 +82,29 @@ def resolve_embedded_paths(doc: Any, base: Path) -> Any:
 
 
 def relative_spec_text(spec_yaml: str, dest: Path, *, root_map: tuple[str, str] | None = None) -> str:
-    """``spec_yaml`` with every stage's ``checkpoint:`` relative to ``dest``. ``root_map`` =
-    ``(old prefix, new prefix)`` rewrites absolute paths of another machine first."""
+    """``spec_yaml`` with every stage's ``checkpoint:`` and its trainer's ``init_policy`` (the policy a
+    continued run started from) relative to ``dest``. ``root_map`` = ``(old prefix, new prefix)``
+    rewrites absolute paths of another machine (or checkout) first."""
     doc = yaml.safe_load(spec_yaml)
     if not isinstance(doc, dict):
         return spec_yaml
+
+    def rel(path: str) -> str:
+        if root_map is not None and path.startswith(root_map[0]):
+            path = root_map[1] + path[len(root_map[0]) :]
+        return os.path.relpath(Path(path).resolve(), Path(dest).resolve()) if Path(path).is_absolute() else path
+
     for stage in STAGE_SECTIONS:
         section = doc.get(stage)
         if not isinstance(section, dict):
             continue
         ck = section.get("checkpoint")
-        if not (isinstance(ck, str) and ck):
-            continue
-        path = ck
-        if root_map is not None and path.startswith(root_map[0]):
-            path = root_map[1] + path[len(root_map[0]) :]
-        if Path(path).is_absolute():
-            section["checkpoint"] = os.path.relpath(Path(path).resolve(), Path(dest).resolve())
+        if isinstance(ck, str) and ck:
+            section["checkpoint"] = rel(ck)
+        trainer = section.get("trainer")
+        params = trainer.get("params") if isinstance(trainer, dict) else None
+        if isinstance(params, dict) and isinstance(params.get("init_policy"), str) and params["init_policy"]:
+            params["init_policy"] = rel(params["init_policy"])
     return yaml.safe_dump(doc, sort_keys=False)
 
 

@@ -149,6 +149,10 @@ def test_committed_checkpoints_name_their_dependencies_by_relative_path():
                 # (pulse_amp_v4 was first exported from another worktree and named ../../../dist/checkpoints/...)
                 resolved = (f.parent / ck).resolve()
                 assert resolved.is_relative_to(inside) and resolved.is_file(), (f, ck)
+            init = (((doc.get(stage) or {}).get("trainer") or {}).get("params") or {}).get("init_policy")
+            if init is not None:  # a continued run names the committed policy it started from
+                resolved = (f.parent / init).resolve()
+                assert not Path(init).is_absolute() and resolved.is_relative_to(inside) and resolved.is_file(), (f, init)
     target = load_evaluation_target(REPO / "checkpoints/pulse_amp_v2/latent.pt", get_plugins())
     assert Path(target.imitator_checkpoint).resolve() == (REPO / "checkpoints/imitator_amp_v2/policy.pt").resolve()
 
@@ -159,6 +163,10 @@ def test_export_rewrites_the_copied_checkpoints_embedded_paths(tmp_path):
     text = "imitator:\n  name: phc\n  checkpoint: /abs/x/checkpoints/imitator/policy.pt\nlatent:\n  name: pulse\n"
     out = relative_spec_text(text, tmp_path / "dest", root_map=("/abs/x/", str(tmp_path) + "/"))
     assert "checkpoint: ../checkpoints/imitator/policy.pt" in out
+    # a continued run's starting policy too (imitator_amp_v5 was trained in another worktree)
+    text = "imitator:\n  name: phc\n  trainer:\n    name: ppo\n    params:\n      init_policy: /abs/x/checkpoints/v4/policy.pt\n"
+    out = relative_spec_text(text, tmp_path / "dest", root_map=("/abs/x/", str(tmp_path) + "/"))
+    assert "init_policy: ../checkpoints/v4/policy.pt" in out
 
 
 def test_a_checkpoint_names_the_package_of_a_missing_plugin(tmp_path, capsys):

@@ -26,8 +26,10 @@ def test_reproduce_spec_trains_everything_and_shares_the_imitator():
     # imitator _v2 and _v3: the same recipe trained further; vmp_amp: an earlier recipe, superseded by vmp_amp_v2;
     # vmp_amp_m: the M-conditioning ablation of the vmp cell; pulse_amp_v2: the pulse recipe with the
     # _v2 imitator as the teacher (tests below); imitator _v4: _v3 continued by specs/imitator/continue_v3.yaml;
-    # pulse_amp_v4: the pulse recipe with the _v4 imitator as the teacher (specs/latent/pulse_amp_v4.yaml, tested below)
-    covered = {"imitator_amp", "imitator_amp_v2", "imitator_amp_v3", "imitator_amp_v4", "vmp_amp_v2", "vmp_amp_m", "pulse_amp_v2", "pulse_amp_v4"}
+    # pulse_amp_v4: the pulse recipe with the _v4 imitator as the teacher (specs/latent/pulse_amp_v4.yaml, tested below);
+    # imitator _v5: _v4 continued by specs/imitator/continue_v4_contacts_getup.yaml (tested below)
+    covered = {"imitator_amp", "imitator_amp_v2", "imitator_amp_v3", "imitator_amp_v4", "imitator_amp_v5", "vmp_amp_v2", "vmp_amp_m"}
+    covered |= {"pulse_amp_v2", "pulse_amp_v4"}
     covered |= latents
     assert committed <= covered, f"committed checkpoints without a cell: {committed - covered}"
     keys = {name: stage_keys(r.spec) for name, r in cells.items()}
@@ -83,3 +85,18 @@ def test_the_v4_latent_specs_differ_from_their_recipe_only_by_teacher_and_thread
     a, b = base.imitator.model_dump(), v4.imitator.model_dump()
     a.pop("checkpoint"), b.pop("checkpoint")
     assert a == b
+
+
+def test_imitator_v5_was_trained_by_the_committed_getup_recipe_from_v4():
+    """checkpoints/imitator_amp_v5 embeds the spec that trained it: continue_v4_contacts_getup.yaml, from v4."""
+    import yaml
+
+    from mocap.checkpoint import load_checkpoint
+
+    embedded = yaml.safe_load(load_checkpoint(ROOT / "checkpoints" / "imitator_amp_v5" / "policy.pt")["spec"])
+    recipe = load_spec(ROOT / "specs" / "imitator" / "continue_v4_contacts_getup.yaml", get_plugins()).spec
+    assert embedded["name"] == recipe.name
+    params = embedded["imitator"]["params"]
+    assert params["getup_starts"] == recipe.imitator.params["getup_starts"]
+    assert params["fail_states"]["fall_init_prob"] == recipe.imitator.params["fail_states"]["fall_init_prob"]
+    assert embedded["imitator"]["trainer"]["params"]["init_policy"] == "../imitator_amp_v4/policy.pt"
