@@ -31,19 +31,36 @@ from mocap.fail_state_params import GetUpStartParams
 from mocap.state import HumanoidState, MotionFrames
 
 
-class GetUpStarts:
-    """Per-env alignment of get-up references for ``n`` envs on ``library`` (module docstring)."""
+class GetUpClips:
+    """The get-up clips of ``library`` (names matching the fnmatch ``patterns``; a clear error when
+    none does) and how to lay one onto a fallen humanoid. ``who`` names the setting in the error."""
 
-    def __init__(self, library: Any, params: GetUpStartParams, n: int):
+    def __init__(self, library: Any, patterns: list[str], who: str = "getup_starts"):
         names = list(library.clip_names)
-        self.clips = torch.tensor([i for i, name in enumerate(names) if any(fnmatch.fnmatchcase(name, pat) for pat in params.clips)], dtype=torch.long)
+        self.clips = torch.tensor([i for i, name in enumerate(names) if any(fnmatch.fnmatchcase(name, pat) for pat in patterns)], dtype=torch.long)
         if not len(self.clips):
-            raise ValueError(f"getup_starts: no clip matches {params.clips} (clips: {', '.join(names)})")
-        self.lib, self.hold_s = library, float(params.hold_s)
+            raise ValueError(f"{who}: no clip matches {patterns} (clips: {', '.join(names)})")
         zero = torch.zeros(len(self.clips), dtype=library.dtype, device=library.device)
         first = library.frames(self.clips.to(library.device), zero)
         self._first_rot = first.root_rot.double().cpu()
         self._first_xy = first.root_pos[:, :2].double().cpu()
+
+    def lay_onto(self, root_pos: Tensor, root_rot: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+        """For humanoids at ``root_pos`` (K, 3) lying as ``root_rot`` (K, 4): (clip (K,), yaw (K,),
+        pivot (K, 2), target (K, 2)) such that ``yaw_frames(frames, yaw, pivot, target)`` puts the
+        matching clip's first root under the humanoid's, turned to lie like it
+        (:func:`mocap.motion.transform.match_first_frames`)."""
+        clip, yaw, _ = match_first_frames(self._first_rot, self.clips, root_rot.double().cpu())
+        pivot = self._first_xy[torch.searchsorted(self.clips, clip)]
+        return clip, yaw, pivot, root_pos[:, :2].double().cpu()
+
+
+class GetUpStarts:
+    """Per-env alignment of get-up references for ``n`` envs on ``library`` (module docstring)."""
+
+    def __init__(self, library: Any, params: GetUpStartParams, n: int):
+        self.getups = GetUpClips(library, params.clips)
+        self.lib, self.hold_s = library, float(params.hold_s)
         self.active = torch.zeros(n, dtype=torch.bool)
         self.yaw = torch.zeros(n, dtype=torch.float64)
         self.pivot = torch.zeros(n, 2, dtype=torch.float64)
@@ -57,13 +74,12 @@ class GetUpStarts:
         rows = fallen.cpu().nonzero().squeeze(-1)
         if not len(rows):
             return torch.zeros(0, dtype=torch.long)
-        clip, yaw, _ = match_first_frames(self._first_rot, self.clips, state.root_rot[rows].double().cpu())
-        j = torch.searchsorted(self.clips, clip)
+        clip, yaw, pivot, target = self.getups.lay_onto(state.root_pos[rows], state.root_rot[rows])
         env = ids[rows]
         self.active[env] = True
         self.yaw[env] = yaw
-        self.pivot[env] = self._first_xy[j]
-        self.target[env] = state.root_pos[rows, :2].double().cpu()
+        self.pivot[env] = pivot
+        self.target[env] = target
         return clip
 
     def apply(self, frames: MotionFrames, ids: Tensor | None, times: Tensor) -> MotionFrames:
@@ -98,4 +114,4 @@ class GetUpStarts:
             setattr(self, k, v.clone())
 
 
-__all__ = ["GetUpStartParams", "GetUpStarts"]
+__all__ = ["GetUpClips", "GetUpStartParams", "GetUpStarts"]

@@ -58,6 +58,7 @@ from torch import Tensor
 from mocap.kinematics import dofs_from_local_rotations, forward_kinematics, local_rotations_from_dofs
 from mocap.motion.clip import Clip, MotionDataError
 from mocap.motion.sources import MotionSet, VelocityMode, check_clip_skeleton
+from mocap.motion.transform import yaw_quat
 from mocap.motion.velocity import central_differences, gaussian_smooth
 from mocap.rotations import angular_velocity, heading_angle, quat_mul, quat_slerp
 from mocap.skeleton import Skeleton
@@ -119,11 +120,6 @@ def _rotate_z(v: Tensor, angle: Tensor) -> Tensor:
     x, y = v[..., 0], v[..., 1]
     out = torch.stack((c * x - s * y, s * x + c * y), dim=-1)
     return torch.cat((out, v[..., 2:]), dim=-1) if v.shape[-1] == 3 else out
-
-
-def _quat_z(angle: Tensor) -> Tensor:
-    zero = torch.zeros_like(angle)
-    return torch.stack((torch.cos(0.5 * angle), zero, zero, torch.sin(0.5 * angle)), dim=-1)
 
 
 class MotionLibrary:
@@ -504,7 +500,7 @@ class MotionLibrary:
         turn = (k * h).to(dt)[:, None]
         body_pos = _rotate_z(body_pos, turn)
         body_pos = torch.cat((body_pos[..., :2] + t_k.to(dt)[:, None, :], body_pos[..., 2:]), dim=-1)
-        body_rot = quat_mul(_quat_z(turn).expand_as(body_rot), body_rot)
+        body_rot = quat_mul(yaw_quat(turn).expand_as(body_rot), body_rot)
         return body_pos, body_rot, _rotate_z(lin_vel, turn), _rotate_z(ang_vel, turn)
 
 

@@ -31,7 +31,6 @@ says so (``planner`` in the JSON).
 
 from __future__ import annotations
 
-import fnmatch
 import math
 from dataclasses import replace
 from typing import Any
@@ -40,7 +39,8 @@ import torch
 from pydantic import BaseModel, ConfigDict, Field
 from torch import Tensor
 
-from mocap.motion.transform import frames_at_rate, match_first_frames, yaw_frames
+from mocap.getup_starts import GetUpClips
+from mocap.motion.transform import frames_at_rate, yaw_frames
 from mocap.rotations import heading_angle
 from mocap.state import HUMANOID_FIELDS, MotionFrames
 
@@ -97,9 +97,7 @@ class GetUpPlanner:
 
     def __init__(self, library: Any, params: GetUpPlannerParams, n: int, dt: float, steps: int = 1):
         names = list(library.clip_names)
-        self.getups = [i for i, name in enumerate(names) if any(fnmatch.fnmatchcase(name, pat) for pat in params.clips)]
-        if not self.getups:
-            raise ValueError(f"get-up planner: no clip matches {params.clips} (clips: {', '.join(names)})")
+        self.getups = GetUpClips(library, params.clips, who="get-up planner")
         self.approach: int | None = None
         if params.approach_clip is not None:
             if params.approach_clip not in names:
@@ -113,8 +111,6 @@ class GetUpPlanner:
         self.standing = standing_height(library)
         self.up_ratio = params.up_ratio
         self.fallen_height = params.fallen_ratio * self.standing
-        zero = torch.zeros(len(self.getups), dtype=library.dtype, device=library.device)
-        self._first_rot = library.frames(torch.tensor(self.getups), zero).root_rot.double().cpu()
         self.mode = torch.full((n,), TRACK, dtype=torch.long)
         self.clip = torch.zeros(n, dtype=torch.long)
         self.t0 = torch.zeros(n, dtype=torch.float64)  # clip time at the segment's step `k0`
@@ -134,7 +130,7 @@ class GetUpPlanner:
         grid = torch.arange(0.0, dur, 1.0 / 30.0, dtype=torch.float64)
         cyc = library.frames(torch.full((len(grid),), approach, dtype=torch.long), grid.to(library.dtype)).dof_pos.double().cpu()
         out = torch.zeros(int(library.num_clips), dtype=torch.float64)
-        for c in self.getups:
+        for c in self.getups.clips.tolist():
             end = library.frames(torch.tensor([c]), library.durations[c : c + 1].to(library.dtype)).dof_pos.double().cpu()
             out[c] = grid[int(((cyc - end) ** 2).sum(-1).argmin())]
         return out
@@ -159,15 +155,14 @@ class GetUpPlanner:
         return torch.where(self.mode == APPROACH, rate, torch.ones_like(rate))
 
     def _start_getup(self, rows: Tensor, k: int, root_pos: Tensor, root_rot: Tensor) -> None:
-        clip, yaw, _ = match_first_frames(self._first_rot, torch.tensor(self.getups), root_rot[rows])
-        first = self.lib.frames(clip, torch.zeros(len(rows), dtype=self.lib.dtype, device=self.lib.device))
+        clip, yaw, pivot, target = self.getups.lay_onto(root_pos[rows], root_rot[rows])
         self.mode[rows] = GETUP
         self.clip[rows] = clip
         self.t0[rows] = 0.0
         self.k0[rows] = k - 1  # the reference of step k is the clip one control step in
         self.yaw[rows] = yaw
-        self.pivot[rows] = first.root_pos[:, :2].double().cpu()
-        self.target[rows] = root_pos[rows, :2]
+        self.pivot[rows] = pivot
+        self.target[rows] = target
         self.getups_started[rows] += 1
 
     def _aim(self, rows: Tensor, k: int, root_pos: Tensor, root_rot: Tensor, goal: Tensor, restart: Tensor) -> None:
