@@ -42,13 +42,15 @@ space the env uses :meth:`~mocap.interfaces.LatentSpace.decode_action`, ``reset_
 ``task_state_dict`` (declared there with defaults).
 
 ``scratch`` (registered by :mod:`mocap.hierarchy`, its params there) is the no-latent baseline: a latent space whose task action is the
-PD target itself, ``q = offset + scale · a`` with ``a`` in [-1, 1] mapped to each joint's range
+PD target itself, ``q = offset + scale · a`` with ``a`` in [-1, 1] mapped to each joint's range (a hinge that may
+wind more than one turn, e.g. amp's shoulders with ``shoulder_turns`` > 0.5: to [-pi, pi])
 (PHC's absolute action mapping), so that "task policy from scratch" runs through the same code.
 """
 
 from __future__ import annotations
 
 import inspect
+import math
 from typing import Any, Callable
 
 import torch
@@ -80,8 +82,10 @@ class ScratchLatent(LatentSpace):
         super().__init__()
         lo_t = torch.tensor([float(h.range[0]) for h in skeleton.hinges])
         hi_t = torch.tensor([float(h.range[1]) for h in skeleton.hinges])
-        self.register_buffer("offset", 0.5 * (lo_t + hi_t))
-        self.register_buffer("scale", 0.5 * (hi_t - lo_t) * params.range_scale)
+        # a hinge that may wind more than a turn (amp's shoulder_turns) is mapped over one turn about 0
+        wide = hi_t - lo_t > 2 * math.pi + 1e-9
+        self.register_buffer("offset", torch.where(wide, 0.0, 0.5 * (lo_t + hi_t)))
+        self.register_buffer("scale", torch.where(wide, math.pi, 0.5 * (hi_t - lo_t)) * params.range_scale)
         self.latent_dim = skeleton.num_dofs
 
     def encoder(self, obs: Observations) -> LatentSample:

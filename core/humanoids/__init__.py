@@ -26,6 +26,16 @@ class AmpParams(BaseModel):
     gain_scale: float = Field(1.0, gt=0.0, description="multiplies every kp and kd of DeepMimic's table")
     torque_scale: float = Field(1.0, gt=0.0, description="multiplies every torque limit")
     friction: float = Field(0.9, gt=0.0, description="sliding friction of the body geoms")
+    shoulder_turns: float = Field(
+        0.5,
+        gt=0.0,
+        le=64.0,
+        description="range of the shoulders' y and z hinges in full turns each way (0.5: +-180 deg, the checkpoints up to "
+        "imitator_amp_v5). The DeepMimic clips cross the y-x-z decomposition's singularity, and the unwrapped shoulder "
+        "angles of punch, spinkick, backflip, dance_a, dance_b and spin leave +-180 deg within 0.8 s; 8 "
+        "(mocap.humanoids.amp.FREE_SHOULDER_TURNS) admits every bundled clip, and looping clips then carry their "
+        "per-cycle winding on (MotionLibrary)",
+    )
 
 
 class SmplParams(BaseModel):

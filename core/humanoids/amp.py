@@ -84,6 +84,16 @@ BALL_RANGES: dict[str, dict[str, tuple[float, float]]] = {
     "shoulder": {"y": deg(-180, 180), "x": deg(-90, 45), "z": deg(-180, 180)},
 }
 
+#: ``shoulder_turns`` that lets the shoulders follow every bundled clip. Decomposed as y-x-z, an arm
+#: that passes near the horizontal sideways (x = +-90 deg, the singularity) makes y and z swing by
+#: about pi each within a frame or two; unwrapped over time (:class:`~mocap.motion.library.MotionLibrary`)
+#: the shoulders of punch, spinkick, backflip, dance_a, dance_b and spin span 6.5-9.8 rad and reach
+#: |8.4| rad, and their looping clips wind a full turn per cycle. At +-180 deg those references leave
+#: the hinge range 0.0-0.8 s into the clip (the imitators up to ``imitator_amp_v5`` fail these clips
+#: 0.5-1 s later); wrapped into +-180 deg instead they jump by 2 pi, which a limited hinge cannot
+#: follow either. Eight turns admit the clips and 6 more cycles of winding each way.
+FREE_SHOULDER_TURNS = 8.0
+
 BALL_ORDER = "yxz"
 END_EFFECTORS = ("head", "right_hand", "left_hand", "right_foot", "left_foot")
 FEET = ("right_foot", "left_foot")
@@ -181,6 +191,7 @@ def amp_skeleton(
     gain_scale: float = 1.0,
     torque_scale: float = 1.0,
     friction: float = 0.9,
+    shoulder_turns: float = 0.5,
     urdf: str | Path | None = None,
 ) -> Skeleton:
     """The DeepMimic/AMP humanoid (15 bodies, 28 DoF) built from ``humanoid.urdf``.
@@ -191,6 +202,9 @@ def amp_skeleton(
         gain_scale: multiplies every kp and kd of the DeepMimic gain table.
         torque_scale: multiplies every torque limit.
         friction: sliding friction of the body geoms.
+        shoulder_turns: the shoulders' y and z hinges range over ``+-shoulder_turns`` full turns
+            (0.5: +-180 deg, :data:`BALL_RANGES`). The clips cross the decomposition's singularity
+            and their unwrapped angles span up to 9.8 rad within a clip (:data:`FREE_SHOULDER_TURNS`).
         urdf: another copy of DeepMimic's ``humanoid.urdf`` (default: pybullet_data's).
     """
     text = Path(urdf or urdf_path()).read_text(encoding="utf-8", errors="replace")
@@ -220,6 +234,8 @@ def amp_skeleton(
             kp, kd, tau = kp * gain_scale, kd * gain_scale, tau * torque_scale
             if jtype == "spherical":
                 ranges = dict(BALL_RANGES[kind])
+                if kind == "shoulder":
+                    ranges["y"] = ranges["z"] = (-2.0 * math.pi * shoulder_turns, 2.0 * math.pi * shoulder_turns)
                 if link_name.startswith("left_"):  # mirror about the sagittal plane: x and z flip sign
                     ranges["x"] = (-ranges["x"][1], -ranges["x"][0])
                     ranges["z"] = (-ranges["z"][1], -ranges["z"][0])

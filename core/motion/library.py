@@ -36,7 +36,11 @@ Time outside a clip: a non-looping clip clamps to ``[0, duration]``. A looping c
 ``duration``, its last frame being the next cycle's first, see :mod:`mocap.motion.clip`) wraps:
 ``t = k * duration + t'`` with ``t'`` in ``[0, duration)``, and the root advances by the cycle
 offset once per completed cycle, as DeepMimic does: the horizontal root displacement
-``root_pos[-1] - root_pos[0]`` (xy), times ``k``, with no change of heading. With
+``root_pos[-1] - root_pos[0]`` (xy), times ``k``, with no change of heading. A hinge whose range spans more
+than one turn (the ``amp`` humanoid's shoulders with ``shoulder_turns`` > 0.5) also advances by the
+cycle's winding ``2 pi round((q[-1] - q[0]) / 2 pi)`` per cycle, so that its reference stays
+continuous where a clip's unwrapped angle ends a full turn from where it began; a hinge limited to
+one turn restarts each cycle at its own angles (it could follow neither). With
 ``loop_heading=True`` the heading change of the cycle ``h = heading(last) - heading(first)`` is also
 accumulated: cycle ``k`` is the cycle-0 motion moved by the planar rigid transform ``M^k`` that maps
 the first frame's root (xy position and heading) onto the last frame's. The default is off because
@@ -224,6 +228,9 @@ class MotionLibrary:
         cyc_t = p1 - _rotate_z(p0, dh)
         dh = torch.where(loops, dh, torch.zeros_like(dh))
         cyc_t = torch.where(loops[:, None], cyc_t, torch.zeros_like(cyc_t))
+        span = torch.tensor([h.range[1] - h.range[0] for h in sk.hinges], dtype=f64)
+        wind = 2 * math.pi * torch.round((dof[ends] - dof[starts]) / (2 * math.pi))
+        wind = torch.where(loops[:, None] & (span > 2 * math.pi + 1e-9), wind, torch.zeros_like(wind))
 
         # forward differences; a clip's last frame: next cycle's frame 0 (looping) or previous frame
         fr = fps[seg]
@@ -264,6 +271,8 @@ class MotionLibrary:
         self._loops = loops.to(dev)
         self._cyc_h = dh.to(dev)
         self._cyc_t = cyc_t.to(dev)
+        self._cyc_dof = wind.to(dev)
+        self._winds = bool(torch.any(wind != 0))
         #: packed per-frame tensors (all clips, frame order), (F, ...)
         self.root_pos = root_pos.to(dev, dt)
         self.root_rot = root_rot.to(dev, dt)
@@ -323,6 +332,12 @@ class MotionLibrary:
     def cycle_offsets(self) -> Tensor:
         """(C, 2) horizontal root displacement added per completed cycle (zero for non-looping clips)."""
         return self._cyc_t.to(self.dtype)
+
+    @property
+    def cycle_dof_winding(self) -> Tensor:
+        """(C, D) DoF advance per completed cycle: whole turns, nonzero only for looping clips and
+        hinges whose range spans more than one turn (module docstring)."""
+        return self._cyc_dof.to(self.dtype)
 
     @property
     def total_frames(self) -> int:
@@ -459,6 +474,8 @@ class MotionLibrary:
             body_pos = lerp(self.body_pos)
             body_rot = quat_slerp(self.body_rot[g0], self.body_rot[g1], alpha[:, None])
 
+        if self._winds and bool(torch.any(k != 0)):
+            dof_pos = dof_pos + (k[:, None] * self._cyc_dof[c]).to(dt)
         if bool(torch.any(k != 0)):
             body_pos, body_rot, body_lin_vel, body_ang_vel = self._apply_cycles(c, k, body_pos, body_rot, body_lin_vel, body_ang_vel)
         return MotionFrames(
