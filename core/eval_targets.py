@@ -152,12 +152,18 @@ def _action_count(data: dict[str, Any]) -> int | None:
 def check_trained_humanoid(path: Path, skeleton: Any, plugins: Any, stage: str = "imitator") -> None:
     """Raise :class:`~mocap.checkpoint.CheckpointError` when the spec embedded in checkpoint ``path``
     names another humanoid than ``skeleton``: "trained for humanoid amp with 28 actions; the spec
-    asks for smpl with 69"."""
+    asks for smpl with 69", or the same humanoid with other parameters
+    (:func:`mocap.humanoid_match.check_humanoid_params`)."""
     from mocap.checkpoint import CheckpointError, embedded_humanoid, load_checkpoint
 
     data = load_checkpoint(path)
     trained = embedded_humanoid(data)
-    if trained is None or trained == skeleton.name:
+    if trained is None:
+        return
+    if trained == skeleton.name:
+        from mocap.humanoid_match import check_humanoid_params
+
+        check_humanoid_params(path, data, skeleton, plugins, stage)
         return
     actions = _action_count(data)
     if actions is None:

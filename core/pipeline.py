@@ -128,9 +128,15 @@ class StageContext:
         """Build a stage's component (imitator, latent space or task; default: this stage's).
 
         Stage components share one factory signature: ``factory(params, *, skeleton, checkpoint,
-        device)``; ``checkpoint`` is None when the component is about to be trained.
+        device)``; ``checkpoint`` is None when the component is about to be trained. A checkpoint
+        trained on another humanoid, or on this one with other parameters, is refused
+        (:func:`mocap.eval_targets.check_trained_humanoid`).
         """
         stage = stage or self.stage
+        if checkpoint is not None:  # a trained component acts through the humanoid it was trained on
+            from mocap.eval_targets import check_trained_humanoid
+
+            check_trained_humanoid(Path(checkpoint), self.skeleton, self.plugins, stage)
         component = self.build(stage, skeleton=self.skeleton, checkpoint=checkpoint, device=self.device)
         if stage == "latent" and checkpoint is not None:
             from mocap.distill_files import check_latent_loaded
