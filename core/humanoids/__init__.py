@@ -7,6 +7,8 @@
 
 from __future__ import annotations
 
+from typing import Literal
+
 from pydantic import BaseModel, ConfigDict, Field
 
 from mocap.hooks import hookimpl
@@ -35,6 +37,12 @@ class AmpParams(BaseModel):
         "angles of punch, spinkick, backflip, dance_a, dance_b and spin leave +-180 deg within 0.8 s; 8 "
         "(mocap.humanoids.amp.FREE_SHOULDER_TURNS) admits every bundled clip, and looping clips then carry their "
         "per-cycle winding on (MotionLibrary)",
+    )
+    shoulder_order: Literal["yxz", "xzy"] = Field(
+        "yxz",
+        description="hinge order of the shoulders: 'yxz' (every ball joint's; the checkpoints up to imitator_amp_v5) or "
+        "'xzy', whose singularity the clips stay away from (at most 34 rad/s asked of a shoulder hinge instead of 81; "
+        "mocap.humanoids.amp.SHOULDER_ORDERS)",
     )
 
 

@@ -95,6 +95,17 @@ BALL_RANGES: dict[str, dict[str, tuple[float, float]]] = {
 FREE_SHOULDER_TURNS = 8.0
 
 BALL_ORDER = "yxz"
+
+#: Hinge orders of the shoulders. An Euler decomposition has a singularity where its middle angle is
+#: +-90 deg; next to it the outer two angles swing by about pi within a few frames however the branch is
+#: chosen (a Viterbi search over both branches finds no smoother path). With ``yxz`` that is an arm
+#: raised sideways to the horizontal, which the clips pass close to: the bundled clips ask the
+#: shoulders for up to 81 rad/s (punch, spinkick, dance_a, dance_b, backflip, cartwheel, spin over
+#: 25 rad/s), which the 100 N m actuators cannot follow, and their reaction twists the torso (dance_a
+#: falls backwards as its arms go up). With ``xzy`` (the twist in the middle) the clips keep the middle
+#: angle within 80 deg and ask for at most 34 rad/s; only dance_a's right arm still winds a full turn per
+#: cycle, which ``shoulder_turns`` > 0.5 admits. Measured with ``bench/shoulder_references.py``.
+SHOULDER_ORDERS = ("yxz", "xzy")
 END_EFFECTORS = ("head", "right_hand", "left_hand", "right_foot", "left_foot")
 FEET = ("right_foot", "left_foot")
 
@@ -192,6 +203,7 @@ def amp_skeleton(
     torque_scale: float = 1.0,
     friction: float = 0.9,
     shoulder_turns: float = 0.5,
+    shoulder_order: str = "yxz",
     urdf: str | Path | None = None,
 ) -> Skeleton:
     """The DeepMimic/AMP humanoid (15 bodies, 28 DoF) built from ``humanoid.urdf``.
@@ -205,8 +217,12 @@ def amp_skeleton(
         shoulder_turns: the shoulders' y and z hinges range over ``+-shoulder_turns`` full turns
             (0.5: +-180 deg, :data:`BALL_RANGES`). The clips cross the decomposition's singularity
             and their unwrapped angles span up to 9.8 rad within a clip (:data:`FREE_SHOULDER_TURNS`).
+        shoulder_order: the shoulders' hinge order, ``"yxz"`` (every ball joint's, :data:`BALL_ORDER`)
+            or ``"xzy"`` (:data:`SHOULDER_ORDERS`: the order whose singularity the clips stay away from).
         urdf: another copy of DeepMimic's ``humanoid.urdf`` (default: pybullet_data's).
     """
+    if shoulder_order not in SHOULDER_ORDERS:
+        raise ValueError(f"shoulder_order must be one of {', '.join(SHOULDER_ORDERS)}, got {shoulder_order!r}")
     text = Path(urdf or urdf_path()).read_text(encoding="utf-8", errors="replace")
     root = ET.fromstring(text.replace("\x00", "").strip())  # the shipped file ends with a NUL byte
     links = {el.get("name"): _parse_link(el, URDF_SCALE) for el in root.findall("link")}
@@ -233,15 +249,20 @@ def amp_skeleton(
             kp, kd, tau = GAINS[kind]
             kp, kd, tau = kp * gain_scale, kd * gain_scale, tau * torque_scale
             if jtype == "spherical":
-                ranges = dict(BALL_RANGES[kind])
+                ranges, order = dict(BALL_RANGES[kind]), BALL_ORDER
                 if kind == "shoulder":
-                    ranges["y"] = ranges["z"] = (-2.0 * math.pi * shoulder_turns, 2.0 * math.pi * shoulder_turns)
+                    order = shoulder_order
+                    free = (-2.0 * math.pi * shoulder_turns, 2.0 * math.pi * shoulder_turns)
+                    if order == "yxz":
+                        ranges["y"] = ranges["z"] = free
+                    else:  # x-z-y: the middle hinge (z, the twist) is within +-90 deg by construction
+                        ranges = {"x": free, "z": deg(-90, 90), "y": free}
                 if link_name.startswith("left_"):  # mirror about the sagittal plane: x and z flip sign
                     ranges["x"] = (-ranges["x"][1], -ranges["x"][0])
                     ranges["z"] = (-ranges["z"][1], -ranges["z"][0])
                 joint = Joint(
                     "ball",
-                    hinges(link_name, BALL_ORDER, ranges, kp=kp, kd=kd, torque_limit=tau, armature=armature),
+                    hinges(link_name, order, ranges, kp=kp, kd=kd, torque_limit=tau, armature=armature),
                 )
             elif jtype == "revolute":
                 axis_el, limit_el = jel.find("axis"), jel.find("limit")
@@ -263,6 +284,7 @@ def amp_skeleton(
         metadata={
             "source": "pybullet_data/humanoid/humanoid.urdf (DeepMimic), scale 0.25, y-up -> z-up",
             "ball_joint_order": BALL_ORDER,
+            "shoulder_order": shoulder_order,
             "joint_rotation_from_y_up": "q' = (w, x, -z, y)",
         },
     )
