@@ -47,6 +47,40 @@ def test_shoulder_turns_sets_only_the_shoulders_y_and_z(amp, free):
             assert a == b
 
 
+def test_shoulder_order_xzy(amp):
+    xzy = amp_skeleton(shoulder_turns=FREE_SHOULDER_TURNS, shoulder_order="xzy")
+    names = list(xzy.dof_names)
+    i = names.index("right_shoulder_x")
+    assert names[i : i + 3] == ["right_shoulder_x", "right_shoulder_z", "right_shoulder_y"]
+    ranges = {h.name: h.range for h in xzy.hinges}
+    assert ranges["left_shoulder_z"] == pytest.approx((-math.pi / 2, math.pi / 2))
+    assert ranges["left_shoulder_x"] == pytest.approx((-16 * math.pi, 16 * math.pi))
+    others = [h for h in xzy.hinges if "shoulder" not in h.name]
+    assert others == [h for h in amp.hinges if "shoulder" not in h.name]
+    with pytest.raises(ValueError, match="shoulder_order"):
+        amp_skeleton(shoulder_order="zyx")
+
+
+def _shoulder_speed(skeleton) -> dict[str, float]:
+    """Per bundled clip, the fastest shoulder hinge of the reference, rad/s."""
+    lib = MotionLibrary(DeepMimicSource().load(skeleton), skeleton, dtype=torch.float64)
+    cols = _shoulder_cols(skeleton)
+    out = {}
+    for c, name in enumerate(lib.clip_names):
+        d = lib.dof_pos[lib.frame_clip == c][:, cols]
+        out[name] = float(d.diff(dim=0).abs().max() * lib.fps[c])
+    return out
+
+
+def test_xzy_shoulders_ask_for_slower_references(amp):
+    """yxz passes near its singularity (an arm raised sideways): up to 81 rad/s; xzy at most 35."""
+    yxz = _shoulder_speed(amp)
+    xzy = _shoulder_speed(amp_skeleton(shoulder_order="xzy"))
+    assert max(yxz.values()) > 75.0
+    assert max(xzy.values()) < 35.0
+    assert sum(v > 25.0 for v in yxz.values()) >= 6 and sum(v > 25.0 for v in xzy.values()) <= 2
+
+
 def _shoulder_cols(skeleton) -> list[int]:
     return [i for i, h in enumerate(skeleton.hinges) if "shoulder" in h.name]
 
@@ -63,6 +97,10 @@ def test_bundled_shoulder_references_fit_the_free_shoulders_only(amp, free):
         outside[skeleton is free] = {lib.clip_names[c] for c in lib.frame_clip[out].unique().tolist()}
     assert outside[False] == {"punch", "spinkick", "backflip", "dance_a", "dance_b", "spin"}
     assert outside[True] == set()
+    xzy = amp_skeleton(shoulder_turns=FREE_SHOULDER_TURNS, shoulder_order="xzy")
+    lib = MotionLibrary(DeepMimicSource().load(xzy), xzy, dtype=torch.float64)
+    lo, hi = _ranges(xzy)
+    assert not bool(((lib.dof_pos < lo) | (lib.dof_pos > hi))[:, _shoulder_cols(xzy)].any())
 
 
 def test_bundled_references_are_the_same_motion_on_both_humanoids(amp, free):
@@ -71,6 +109,10 @@ def test_bundled_references_are_the_same_motion_on_both_humanoids(amp, free):
     b = MotionLibrary(DeepMimicSource().load(free), free, dtype=torch.float64)
     torch.testing.assert_close(a.dof_pos, b.dof_pos)
     torch.testing.assert_close(a.body_pos, b.body_pos)
+    # in the other hinge order the DoFs differ, but they reproduce the same bodies
+    xzy = amp_skeleton(shoulder_turns=FREE_SHOULDER_TURNS, shoulder_order="xzy")
+    c = MotionLibrary(DeepMimicSource().load(xzy), xzy, dtype=torch.float64)
+    torch.testing.assert_close(c.body_pos, a.body_pos, atol=1e-9, rtol=0)
     assert not bool(a.cycle_dof_winding.any())  # one-turn hinges never wind
     winding = {b.clip_names[c] for c in range(b.num_clips) if bool(b.cycle_dof_winding[c].any())}
     assert winding == {"spinkick", "backflip", "dance_a", "dance_b", "spin"}
