@@ -382,3 +382,34 @@ def test_distillation_episodes_are_built_on_the_episode_layer(amp):
     state = replace(ep.sim.step(ref.dof_pos.float()), body_pos=ref.body_pos.float())
     out = ep.after_step(state, ref)
     assert bool(out["truncated"].all()) and not bool(out["terminated"].any()) and out["length"].tolist() == [1] * 6
+
+
+def test_teacher_of_another_humanoid_variant_is_refused(amp, teacher_file, tmp_path):
+    """A teacher trained on the amp humanoid with other params (its embedded spec says so) is not
+    distilled onto the default amp humanoid: the stage fails naming the difference (a clamped
+    teacher would otherwise be distilled without any error)."""
+    from mocap.checkpoint import load_checkpoint, save_checkpoint
+    from mocap.pipeline import run_pipeline
+    from mocap.spec import load_spec_text
+    from mocap.testing import use_plugins
+
+    data = load_checkpoint(teacher_file)
+    variant = tmp_path / "teacher_free.pt"
+    save_checkpoint(variant, data, spec_yaml="humanoid:\n  name: amp\n  params: {shoulder_turns: 8.0}\n")
+    spec = f"""\
+spec_version: 1
+name: pulse_variant
+device: cpu
+humanoid: {{name: amp}}
+motions: {{name: deepmimic, params: {{clips: [walk]}}}}
+simulator: {{name: mujoco}}
+imitator: {{name: phc, params: {{action: residual}}, checkpoint: {variant}}}
+latent:
+  name: pulse
+  params: {{latent_dim: 4, encoder_hidden: [16], prior_hidden: [16], decoder_hidden: [16]}}
+  trainer: {{name: distill, params: {{num_envs: 2, horizon: 4, total_env_steps: 16, minibatch_envs: 2, eval_every: 2, eval_horizon: 0.2, act_with: teacher}}}}
+"""
+    with use_plugins(("distill", mocap.distill), ("latent_pulse", mocap_pulse.plugin)) as pset:
+        resolved = load_spec_text(spec, pset)
+        with pytest.raises(Exception, match=r"shoulder_turns: 8\.0.*right_shoulder_y\.range"):
+            run_pipeline(resolved, pset, tmp_path / "run", console=Console(file=io.StringIO()))
