@@ -1,7 +1,7 @@
 """The amp humanoid's ``shoulder_turns`` and what goes with it: hinges that may wind more than a
 turn, the motion library's per-cycle DoF winding of looping clips for them, and scratch's action
 map over one turn. The bug it fixes: at +-180 deg the bundled clips' unwrapped shoulder references
-leave the hinge range (the PD target is clamped there), in exactly the clips no imitator tracked."""
+leave the hinge range (the PD target is clamped there), in five of the six clips v4 failed."""
 
 from __future__ import annotations
 

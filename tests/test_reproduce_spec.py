@@ -27,8 +27,9 @@ def test_reproduce_spec_trains_everything_and_shares_the_imitator():
     # vmp_amp_m: the M-conditioning ablation of the vmp cell; pulse_amp_v2: the pulse recipe with the
     # _v2 imitator as the teacher (tests below); imitator _v4: _v3 continued by specs/imitator/continue_v3.yaml;
     # pulse_amp_v4: the pulse recipe with the _v4 imitator as the teacher (specs/latent/pulse_amp_v4.yaml, tested below);
-    # imitator _v5: _v4 continued by specs/imitator/continue_v4_contacts_getup.yaml (tested below)
-    covered = {"imitator_amp", "imitator_amp_v2", "imitator_amp_v3", "imitator_amp_v4", "imitator_amp_v5", "vmp_amp_v2", "vmp_amp_m"}
+    # imitator _v5: _v4 continued by specs/imitator/continue_v4_contacts_getup.yaml (tested below);
+    # imitator _v6: _v4 continued on the x-z-y humanoid variant by specs/imitator/continue_v4_shoulders.yaml (tested below)
+    covered = {"imitator_amp", "imitator_amp_v2", "imitator_amp_v3", "imitator_amp_v4", "imitator_amp_v5", "imitator_amp_v6", "vmp_amp_v2", "vmp_amp_m"}
     covered |= {"pulse_amp_v2", "pulse_amp_v4"}
     covered |= latents
     assert committed <= covered, f"committed checkpoints without a cell: {committed - covered}"
@@ -100,3 +101,21 @@ def test_imitator_v5_was_trained_by_the_committed_getup_recipe_from_v4():
     assert params["getup_starts"] == recipe.imitator.params["getup_starts"]
     assert params["fail_states"]["fall_init_prob"] == recipe.imitator.params["fail_states"]["fall_init_prob"]
     assert embedded["imitator"]["trainer"]["params"]["init_policy"] == "../imitator_amp_v4/policy.pt"
+
+
+def test_imitator_v6_was_trained_by_the_shoulders_recipe_on_its_humanoid():
+    """checkpoints/imitator_amp_v6 embeds continue_v4_shoulders.yaml: the x-z-y humanoid variant, from v4;
+    continue_v6.yaml continues it on the same humanoid."""
+    import yaml
+
+    from mocap.checkpoint import load_checkpoint
+
+    embedded = yaml.safe_load(load_checkpoint(ROOT / "checkpoints" / "imitator_amp_v6" / "policy.pt")["spec"])
+    recipe = load_spec(ROOT / "specs" / "imitator" / "continue_v4_shoulders.yaml", get_plugins()).spec
+    assert embedded["name"] == recipe.name
+    assert embedded["humanoid"]["params"]["shoulder_order"] == "xzy" == recipe.humanoid.params["shoulder_order"]
+    assert embedded["humanoid"]["params"]["shoulder_turns"] == recipe.humanoid.params["shoulder_turns"] == 8.0
+    assert embedded["imitator"]["trainer"]["params"]["init_policy"] == "../imitator_amp_v4/policy.pt"
+    follow = load_spec(ROOT / "specs" / "imitator" / "continue_v6.yaml", get_plugins()).spec
+    assert follow.humanoid == recipe.humanoid
+    assert Path(follow.imitator.trainer.params["init_policy"]).resolve() == (ROOT / "checkpoints" / "imitator_amp_v6" / "policy.pt").resolve()

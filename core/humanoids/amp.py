@@ -89,8 +89,8 @@ BALL_RANGES: dict[str, dict[str, tuple[float, float]]] = {
 #: about pi each within a frame or two; unwrapped over time (:class:`~mocap.motion.library.MotionLibrary`)
 #: the shoulders of punch, spinkick, backflip, dance_a, dance_b and spin span 6.5-9.8 rad and reach
 #: |8.4| rad, and their looping clips wind a full turn per cycle. At +-180 deg those references leave
-#: the hinge range 0.0-0.8 s into the clip (the imitators up to ``imitator_amp_v5`` fail these clips
-#: 0.5-1 s later); wrapped into +-180 deg instead they jump by 2 pi, which a limited hinge cannot
+#: the hinge range 0.0-0.8 s into the clip (``imitator_amp_v4`` fails five of them, all but spinkick,
+#: 0.5-1.6 s later); wrapped into +-180 deg instead they jump by 2 pi, which a limited hinge cannot
 #: follow either. Eight turns admit the clips and 6 more cycles of winding each way.
 FREE_SHOULDER_TURNS = 8.0
 
