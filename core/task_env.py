@@ -83,7 +83,7 @@ class ScratchLatent(LatentSpace):
         lo_t = torch.tensor([float(h.range[0]) for h in skeleton.hinges])
         hi_t = torch.tensor([float(h.range[1]) for h in skeleton.hinges])
         # a hinge that may wind more than a turn (amp's shoulder_turns) is mapped over one turn about 0
-        wide = hi_t - lo_t > 2 * math.pi + 1e-9
+        wide = torch.tensor([float(h.range[1]) - float(h.range[0]) > 2 * math.pi + 1e-9 for h in skeleton.hinges])
         self.register_buffer("offset", torch.where(wide, 0.0, 0.5 * (lo_t + hi_t)))
         self.register_buffer("scale", torch.where(wide, math.pi, 0.5 * (hi_t - lo_t)) * params.range_scale)
         self.latent_dim = skeleton.num_dofs
