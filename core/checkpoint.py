@@ -293,8 +293,9 @@ def training_status(data: dict[str, Any]) -> str | None:
     return f"in progress (saved at step {int(step):,})" if isinstance(step, (int, float)) else "in progress"
 
 
-def embedded_humanoid(data: dict[str, Any]) -> str | None:
-    """The humanoid named by the spec embedded in a checkpoint (None without one)."""
+def embedded_humanoid_section(data: dict[str, Any]) -> Any:
+    """The ``humanoid:`` section of the spec embedded in a checkpoint (a mapping or a bare name;
+    None without an embedded spec, or with one that does not parse)."""
     import yaml
 
     text = data.get("spec") if isinstance(data, dict) else None
@@ -304,7 +305,12 @@ def embedded_humanoid(data: dict[str, Any]) -> str | None:
         doc = yaml.safe_load(text)
     except yaml.YAMLError:
         return None
-    humanoid = doc.get("humanoid") if isinstance(doc, dict) else None
+    return doc.get("humanoid") if isinstance(doc, dict) else None
+
+
+def embedded_humanoid(data: dict[str, Any]) -> str | None:
+    """The humanoid named by the spec embedded in a checkpoint (None without one)."""
+    humanoid = embedded_humanoid_section(data)
     name = humanoid.get("name") if isinstance(humanoid, dict) else humanoid
     return str(name) if name else None
 
@@ -319,6 +325,7 @@ __all__ = [
     "check_format",
     "convert_checkpoint",
     "embedded_humanoid",
+    "embedded_humanoid_section",
     "hardware",
     "load_checkpoint",
     "package_versions",

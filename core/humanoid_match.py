@@ -21,19 +21,14 @@ __all__ = ["check_humanoid_params", "embedded_humanoid_params", "skeleton_differ
 
 def embedded_humanoid_params(data: dict[str, Any]) -> dict[str, Any] | None:
     """The ``humanoid.params`` of the spec embedded in a checkpoint (``{}`` when it names none;
-    None without an embedded spec or with one that is not a mapping)."""
-    import yaml
+    None without an embedded spec or a humanoid section)."""
+    from mocap.checkpoint import embedded_humanoid_section
 
-    text = data.get("spec") if isinstance(data, dict) else None
-    if not isinstance(text, str):
-        return None
-    try:
-        doc = yaml.safe_load(text)
-    except yaml.YAMLError:
-        return None
-    humanoid = doc.get("humanoid") if isinstance(doc, dict) else None
+    humanoid = embedded_humanoid_section(data)
+    if isinstance(humanoid, str):
+        return {}
     if not isinstance(humanoid, dict):
-        return {} if isinstance(humanoid, str) else None
+        return None
     params = humanoid.get("params")
     return dict(params) if isinstance(params, dict) else {}
 

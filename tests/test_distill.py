@@ -247,6 +247,23 @@ def test_latent_imitator_runs_through_rollout_imitation(amp, walk, teacher_file)
 
 
 # --------------------------------------------------------------------------------- as a stage
+def _tiny_pulse_spec(name: str, teacher: Path) -> str:
+    """A spec distilling a 4-dim PULSE from ``teacher`` on the walk clip in a few steps."""
+    return f"""\
+spec_version: 1
+name: {name}
+device: cpu
+humanoid: {{name: amp}}
+motions: {{name: deepmimic, params: {{clips: [walk]}}}}
+simulator: {{name: mujoco}}
+imitator: {{name: phc, params: {{action: residual}}, checkpoint: {teacher}}}
+latent:
+  name: pulse
+  params: {{latent_dim: 4, encoder_hidden: [16], prior_hidden: [16], decoder_hidden: [16]}}
+  trainer: {{name: distill, params: {{num_envs: 2, horizon: 4, total_env_steps: 16, minibatch_envs: 2, eval_every: 2, eval_horizon: 0.2, act_with: teacher}}}}
+"""
+
+
 def test_distill_runs_as_a_pipeline_stage(amp, teacher_file, tmp_path):
     """The real wiring: spec validation, ``ctx.stage_component``, ``ctx.build``, DONE.json, and the
     latent factory rebuilding the trained student from the stage's checkpoint."""
@@ -254,19 +271,7 @@ def test_distill_runs_as_a_pipeline_stage(amp, teacher_file, tmp_path):
     from mocap.spec import load_spec_text
     from mocap.testing import use_plugins
 
-    spec = f"""\
-spec_version: 1
-name: pulse_tiny
-device: cpu
-humanoid: {{name: amp}}
-motions: {{name: deepmimic, params: {{clips: [walk]}}}}
-simulator: {{name: mujoco}}
-imitator: {{name: phc, params: {{action: residual}}, checkpoint: {teacher_file}}}
-latent:
-  name: pulse
-  params: {{latent_dim: 4, encoder_hidden: [16], prior_hidden: [16], decoder_hidden: [16]}}
-  trainer: {{name: distill, params: {{num_envs: 2, horizon: 4, total_env_steps: 16, minibatch_envs: 2, eval_every: 2, eval_horizon: 0.2, act_with: teacher}}}}
-"""
+    spec = _tiny_pulse_spec("pulse_tiny", teacher_file)
     with use_plugins(("distill", mocap.distill), ("latent_pulse", mocap_pulse.plugin)) as pset:
         resolved = load_spec_text(spec, pset)
         records_ = run_pipeline(resolved, pset, tmp_path / "run", console=Console(file=io.StringIO()))
@@ -396,19 +401,7 @@ def test_teacher_of_another_humanoid_variant_is_refused(amp, teacher_file, tmp_p
     data = load_checkpoint(teacher_file)
     variant = tmp_path / "teacher_free.pt"
     save_checkpoint(variant, data, spec_yaml="humanoid:\n  name: amp\n  params: {shoulder_turns: 8.0}\n")
-    spec = f"""\
-spec_version: 1
-name: pulse_variant
-device: cpu
-humanoid: {{name: amp}}
-motions: {{name: deepmimic, params: {{clips: [walk]}}}}
-simulator: {{name: mujoco}}
-imitator: {{name: phc, params: {{action: residual}}, checkpoint: {variant}}}
-latent:
-  name: pulse
-  params: {{latent_dim: 4, encoder_hidden: [16], prior_hidden: [16], decoder_hidden: [16]}}
-  trainer: {{name: distill, params: {{num_envs: 2, horizon: 4, total_env_steps: 16, minibatch_envs: 2, eval_every: 2, eval_horizon: 0.2, act_with: teacher}}}}
-"""
+    spec = _tiny_pulse_spec("pulse_variant", variant)
     with use_plugins(("distill", mocap.distill), ("latent_pulse", mocap_pulse.plugin)) as pset:
         resolved = load_spec_text(spec, pset)
         with pytest.raises(Exception, match=r"shoulder_turns: 8\.0.*right_shoulder_y\.range"):
