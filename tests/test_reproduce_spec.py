@@ -28,8 +28,10 @@ def test_reproduce_spec_trains_everything_and_shares_the_imitator():
     # _v2 imitator as the teacher (tests below); imitator _v4: _v3 continued by specs/imitator/continue_v3.yaml;
     # pulse_amp_v4: the pulse recipe with the _v4 imitator as the teacher (specs/latent/pulse_amp_v4.yaml, tested below);
     # imitator _v5: _v4 continued by specs/imitator/continue_v4_contacts_getup.yaml (tested below);
-    # imitator _v6: _v4 continued on the x-z-y humanoid variant by specs/imitator/continue_v4_shoulders.yaml (tested below)
+    # imitator _v6: _v4 continued on the x-z-y humanoid variant by specs/imitator/continue_v4_shoulders.yaml (tested below);
+    # imitator _v7: _v6 continued by specs/imitator/continue_v6.yaml with 256 envs (tested below)
     covered = {"imitator_amp", "imitator_amp_v2", "imitator_amp_v3", "imitator_amp_v4", "imitator_amp_v5", "imitator_amp_v6", "vmp_amp_v2", "vmp_amp_m"}
+    covered |= {"imitator_amp_v7"}
     covered |= {"pulse_amp_v2", "pulse_amp_v4"}
     covered |= latents
     assert committed <= covered, f"committed checkpoints without a cell: {committed - covered}"
@@ -119,3 +121,26 @@ def test_imitator_v6_was_trained_by_the_shoulders_recipe_on_its_humanoid():
     follow = load_spec(ROOT / "specs" / "imitator" / "continue_v6.yaml", get_plugins()).spec
     assert follow.humanoid == recipe.humanoid
     assert Path(follow.imitator.trainer.params["init_policy"]).resolve() == (ROOT / "checkpoints" / "imitator_amp_v6" / "policy.pt").resolve()
+
+
+def test_imitator_v7_was_trained_by_continue_v6_with_the_larger_batch():
+    """checkpoints/imitator_amp_v7 embeds continue_v6.yaml with 256 envs and minibatches of 8192, from v6 on
+    the same humanoid variant; continue_v7.yaml continues it with that recipe and batch."""
+    import yaml
+
+    from mocap.checkpoint import load_checkpoint
+
+    data = load_checkpoint(ROOT / "checkpoints" / "imitator_amp_v7" / "policy.pt")
+    embedded = yaml.safe_load(data["spec"])
+    recipe = load_spec(ROOT / "specs" / "imitator" / "continue_v6.yaml", get_plugins()).spec
+    assert embedded["name"] == recipe.name
+    assert embedded["humanoid"]["params"]["shoulder_order"] == "xzy" == recipe.humanoid.params["shoulder_order"]
+    trainer = embedded["imitator"]["trainer"]["params"]
+    assert trainer["init_policy"] == "../imitator_amp_v6/policy.pt"
+    assert (trainer["num_envs"], trainer["minibatch_size"]) == (256, 8192)
+    assert data["extra"]["env_steps"] == 14024704
+    follow = load_spec(ROOT / "specs" / "imitator" / "continue_v7.yaml", get_plugins()).spec
+    assert follow.humanoid == recipe.humanoid
+    params = follow.imitator.trainer.params
+    assert (params["num_envs"], params["minibatch_size"]) == (256, 8192)
+    assert Path(params["init_policy"]).resolve() == (ROOT / "checkpoints" / "imitator_amp_v7" / "policy.pt").resolve()
