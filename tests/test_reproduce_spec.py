@@ -144,3 +144,27 @@ def test_imitator_v7_was_trained_by_continue_v6_with_the_larger_batch():
     params = follow.imitator.trainer.params
     assert (params["num_envs"], params["minibatch_size"]) == (256, 8192)
     assert Path(params["init_policy"]).resolve() == (ROOT / "checkpoints" / "imitator_amp_v7" / "policy.pt").resolve()
+
+
+@pytest.mark.parametrize(("name", "getup"), [("pulse_amp_v7", False), ("pulse_amp_v7_getup", True), ("hybrid_rvq_amp_v7", True)])
+def test_the_v7_latent_specs_differ_from_the_v4_ones_by_teacher_humanoid_and_getup_starts(name, getup):
+    """specs/latent/<name>.yaml: the v4 recipe with imitator_amp_v7 as the teacher, on its humanoid variant,
+    on one torch thread, and (getup) with 10% fallen starts that track a get-up clip; nothing else changed."""
+    plugins = get_plugins()
+    family = name.split("_amp")[0]
+    v4 = load_spec(ROOT / "specs" / "latent" / f"{family}_amp_v4.yaml", plugins).spec
+    v7 = load_spec(ROOT / "specs" / "latent" / f"{name}.yaml", plugins).spec
+    assert Path(v7.imitator.checkpoint).parent.name == "imitator_amp_v7"
+    assert (v7.humanoid.params["shoulder_order"], v7.humanoid.params["shoulder_turns"]) == ("xzy", 8.0)
+    a, b = v4.latent.model_dump(), v7.latent.model_dump()
+    assert b["trainer"]["params"]["torch_threads"] == 1
+    b["trainer"]["params"]["torch_threads"] = a["trainer"]["params"]["torch_threads"]
+    fail, starts = b["trainer"]["params"]["fail_states"], b["trainer"]["params"]["getup_starts"]
+    assert (fail is not None, starts is not None) == (getup, getup)
+    if getup:
+        assert (fail["fall_init_prob"], fail["recovery_episode_prob"], starts["clips"]) == (0.1, 0.0, ["getup*"])
+    b["trainer"]["params"]["fail_states"], b["trainer"]["params"]["getup_starts"] = None, None
+    assert a == b
+    a, b = v4.imitator.model_dump(), v7.imitator.model_dump()
+    a.pop("checkpoint"), b.pop("checkpoint")
+    assert a == b
