@@ -31,7 +31,7 @@ def test_reproduce_spec_trains_everything_and_shares_the_imitator():
     # imitator _v6: _v4 continued on the x-z-y humanoid variant by specs/imitator/continue_v4_shoulders.yaml (tested below);
     # imitator _v7: _v6 continued by specs/imitator/continue_v6.yaml with 256 envs (tested below)
     covered = {"imitator_amp", "imitator_amp_v2", "imitator_amp_v3", "imitator_amp_v4", "imitator_amp_v5", "imitator_amp_v6", "vmp_amp_v2", "vmp_amp_m"}
-    covered |= {"imitator_amp_v7"}
+    covered |= {"imitator_amp_v7", "pulse_amp_v7", "hybrid_rvq_amp_v7"}  # the v7 latent specs, tested below
     covered |= {"pulse_amp_v2", "pulse_amp_v4"}
     covered |= latents
     assert committed <= covered, f"committed checkpoints without a cell: {committed - covered}"
