@@ -20,6 +20,12 @@ does not depend on what else shares the cores (the minutes are still recorded).
 
 It measures whatever code ``mocap`` imports: to measure another checkout, run this script with that
 checkout's packages first on ``PYTHONPATH`` (the child inherits it), ``--label`` naming it.
+
+Nothing is lost on interruption: with ``--workdir`` every snapshot is listed in
+``WORKDIR/snapshots.json`` as it is taken and each evaluation is kept next to its snapshot
+(``eval.json``, reused when newer than the snapshot). If the session ends mid-run, evaluate what
+was saved with ``--evaluate-only --workdir WORKDIR`` (the JSON then says the training did not
+finish, and at how many env steps it stopped).
 """
 
 from __future__ import annotations
@@ -61,6 +67,20 @@ def _start(spec: Path, work: Path, checkpoint_every: int, overrides: list[str]) 
     return subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT), log, time.perf_counter()
 
 
+def save_snapshots(work: Path, snaps: list[dict], finished: bool) -> None:
+    """List the snapshots taken so far in ``work/snapshots.json`` (atomically), so an interrupted run
+    can still be evaluated."""
+    tmp = work / "snapshots.json.tmp"
+    tmp.write_text(json.dumps({"finished": finished, "snapshots": snaps}, indent=2) + "\n")
+    os.replace(tmp, work / "snapshots.json")
+
+
+def load_snapshots(work: Path) -> tuple[list[dict], bool]:
+    """The snapshots listed in ``work/snapshots.json`` and whether the training finished."""
+    d = json.loads((work / "snapshots.json").read_text())
+    return list(d["snapshots"]), bool(d["finished"])
+
+
 def _stop(child: subprocess.Popen) -> None:
     """A clean stop of the training child (Ctrl-C: it saves its checkpoint), killed after 2 min."""
     if child.poll() is None:
@@ -91,11 +111,13 @@ def train(spec: Path, minutes: float, eval_every: float, checkpoint_every: int, 
             steps = _env_steps(dst)
             snaps.append({"minutes": mark, "env_steps": steps, "path": str(dst)})
             print(f"[{mark:5.1f} min] snapshot at {steps / 1e6:.2f}M env steps", flush=True)
+            save_snapshots(work, snaps, finished=False)
             if child.poll() is not None:
                 break
     finally:
         _stop(child)
         log.close()
+    save_snapshots(work, snaps, finished=True)
     return snaps
 
 
@@ -122,6 +144,7 @@ def train_steps(spec: Path, env_steps: int, snapshot_steps: int, checkpoint_ever
                     minutes = (time.perf_counter() - t0) / 60
                     snaps.append({"minutes": round(minutes, 2), "env_steps": steps, "path": str(dst)})
                     print(f"[{minutes:5.1f} min] snapshot at {steps / 1e6:.2f}M env steps", flush=True)
+                    save_snapshots(work, snaps, finished=False)
                     while next_mark <= steps:
                         next_mark += snapshot_steps
             if done:
@@ -130,6 +153,7 @@ def train_steps(spec: Path, env_steps: int, snapshot_steps: int, checkpoint_ever
     finally:
         _stop(child)
         log.close()
+    save_snapshots(work, snaps, finished=child.returncode == 0)
     if child.returncode not in (0, None):
         print(f"warning: the training child exited with {child.returncode}; see {work / 'train.log'}", flush=True)
     return snaps
@@ -137,7 +161,8 @@ def train_steps(spec: Path, env_steps: int, snapshot_steps: int, checkpoint_ever
 
 def evaluate(snap: dict, work: Path) -> dict:
     out = Path(snap["path"]).parent / "eval.json"
-    subprocess.run([sys.executable, "-m", "mocap", "eval", snap["path"], "--json", str(out)], check=True, capture_output=True)
+    if not out.exists() or out.stat().st_mtime < Path(snap["path"]).stat().st_mtime:
+        subprocess.run([sys.executable, "-m", "mocap", "eval", snap["path"], "--json", str(out)], check=True, capture_output=True)
     d = json.loads(out.read_text())
     agg = d["aggregate"]
     return {
@@ -185,12 +210,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--snapshot-steps", type=int, default=500_000, help="with --env-steps: env steps between snapshots")
     ap.add_argument("--checkpoint-every", type=int, default=2, help="trainer iterations between checkpoints")
     ap.add_argument("--set", dest="overrides", action="append", default=[], help="extra spec override (repeatable)")
+    ap.add_argument("--evaluate-only", action="store_true", help="no training: evaluate the snapshots listed in WORKDIR/snapshots.json")
     ap.add_argument("--label", default="this checkout")
     ap.add_argument("--workdir", type=Path, default=None, help="keep the run and snapshots here (default: a temporary folder)")
     ap.add_argument("--out", type=Path, default=Path("bench/results/time_to_skill.json"))
     args = ap.parse_args(argv)
     if args.env_steps is None and (args.eval_every <= 0 or args.minutes < args.eval_every):
         ap.error("--eval-every must be > 0 and at most --minutes")
+    if args.evaluate_only and (args.workdir is None or not (args.workdir / "snapshots.json").is_file()):
+        ap.error("--evaluate-only needs --workdir holding the snapshots.json of an earlier run")
     if args.env_steps is not None and (args.env_steps <= 0 or args.snapshot_steps <= 0):
         ap.error("--env-steps and --snapshot-steps must be > 0")
     os.environ.setdefault("MUJOCO_GL", "egl")
@@ -200,7 +228,10 @@ def main(argv: list[str] | None = None) -> int:
     work.mkdir(parents=True, exist_ok=True)
     load_before = os.getloadavg()
     started = time.strftime("%Y-%m-%dT%H:%M:%S")
-    if args.env_steps is not None:
+    finished = True
+    if args.evaluate_only:
+        snaps, finished = load_snapshots(work)
+    elif args.env_steps is not None:
         snaps = train_steps(args.spec.resolve(), args.env_steps, args.snapshot_steps, args.checkpoint_every, work, args.overrides)
     else:
         snaps = train(args.spec.resolve(), args.minutes, args.eval_every, args.checkpoint_every, work, args.overrides)
@@ -216,10 +247,11 @@ def main(argv: list[str] | None = None) -> int:
         "overrides": args.overrides,
         "minutes": args.minutes if args.env_steps is None else None,
         "env_steps_budget": args.env_steps,
-        "started": started,
-        "load_avg_before": load_before,
-        "load_avg_at_end_of_training": load_after,
+        "started": None if args.evaluate_only else started,  # --evaluate-only: the training's start and load are not known here
+        "load_avg_before": None if args.evaluate_only else load_before,
+        "load_avg_at_end_of_training": None if args.evaluate_only else load_after,
         "protocol": "mocap eval (mocap-imitation-v1), each snapshot evaluated after training",
+        "training_finished": finished,
         "points": points,
         "versions": package_versions(),
         "hardware": hardware(),
