@@ -6,7 +6,9 @@ puts the arms side by side: clips tracked and MPJPE-g (``mocap eval``'s protocol
 training) at each snapshot, and, from the training log of each arm (``--workdir`` of
 ``time_to_skill.py``), the mean training episode length and success over the last iterations (a
 less noisy signal than 15 deterministic evaluation episodes). ``--start`` adds the starting
-policy's own ``eval.json`` as the point at 0 minutes.
+policy's own ``eval.json`` as the point at 0 minutes. ``--max-env-steps N`` keeps only the snapshots
+at or below N env steps, so that arms of different lengths (one stopped early, say) are averaged over
+the same range; an arm whose training did not finish is marked as such.
 
     python bench/imitator_ab.py --arm uniform=bench/results/imitator_ab_uniform.json:/work/abwork/uniform \\
         --arm adaptive=...:... --start checkpoints/imitator_amp_v3/eval.json --out bench/results/imitator_ab.json
@@ -44,8 +46,11 @@ def training_tail(workdir: Path, last: int = 20) -> dict[str, float]:
     return out
 
 
-def load_arm(name: str, result: Path, workdir: Path | None) -> dict[str, Any]:
+def load_arm(name: str, result: Path, workdir: Path | None, max_env_steps: int | None = None) -> dict[str, Any]:
     data = json.loads(result.read_text())
+    points = [p for p in data["points"] if max_env_steps is None or p["env_steps"] <= max_env_steps]
+    if not points:
+        raise SystemExit(f"error: {result}: no snapshot at or below {max_env_steps} env steps")
     arm: dict[str, Any] = {
         "name": name,
         "spec": data.get("spec"),
@@ -54,7 +59,8 @@ def load_arm(name: str, result: Path, workdir: Path | None) -> dict[str, Any]:
         "env_steps_budget": data.get("env_steps_budget"),
         "load_avg_before": data.get("load_avg_before"),
         "load_avg_at_end_of_training": data.get("load_avg_at_end_of_training"),
-        "points": data["points"],
+        "training_finished": bool(data.get("training_finished", True)),
+        "points": points,
     }
     if workdir is not None:
         arm["training_last_20_iterations"] = training_tail(workdir)
@@ -106,6 +112,12 @@ def render(result: dict[str, Any]) -> str:
     if result.get("start"):
         s = result["start"]
         lines += [f"Start: {s['clips_tracked']}/{s['clips_total']} clips, MPJPE-g {_f(s['mpjpe_g_succ_mm'])} mm on them.", ""]
+    if result.get("max_env_steps"):
+        lines += [f"Only the snapshots at or below {result['max_env_steps'] / 1e6:.2f}M env steps are shown, so the arms cover the same range.", ""]
+    for arm in result["arms"]:
+        if not arm.get("training_finished", True):
+            last = arm["points"][-1]["env_steps"] / 1e6
+            lines += [f"{arm['name']}: the training did not finish (stopped after its last snapshot, at {last:.2f}M env steps shown).", ""]
     lines += [
         "| arm | lever | min | env steps | clips | MPJPE-g tracked (mm) | MPJPE-g all (mm) | train ep. length | train success | lr | KL | load avg |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|",
@@ -171,16 +183,17 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--arm", action="append", required=True, help="NAME=RESULT.json[:WORKDIR] (repeatable)")
     ap.add_argument("--start", type=Path, default=None, help="eval.json of the starting policy (the 0-minute point)")
+    ap.add_argument("--max-env-steps", type=int, default=None, help="keep only the snapshots at or below this many env steps")
     ap.add_argument("--out", type=Path, default=Path("bench/results/imitator_ab.json"))
     args = ap.parse_args(argv)
     arms, spec = [], None
     for item in args.arm:
         name, _, rest = item.partition("=")
         result_path, _, workdir = rest.partition(":")
-        arm = load_arm(name, Path(result_path), Path(workdir) if workdir else None)
+        arm = load_arm(name, Path(result_path), Path(workdir) if workdir else None, args.max_env_steps)
         spec = spec or json.loads(Path(result_path).read_text()).get("spec")
         arms.append(arm)
-    result = {"spec": spec, "start": start_point(args.start) if args.start else None, "arms": arms}
+    result = {"spec": spec, "start": start_point(args.start) if args.start else None, "max_env_steps": args.max_env_steps, "arms": arms}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=2) + "\n")
     args.out.with_suffix(".md").write_text(render(result))

@@ -63,3 +63,21 @@ def test_an_arm_with_its_own_spec_names_it_and_the_summary_averages_the_snapshot
     assert "| base | `(the spec as is)` | 3 | 10.00 (9-11) | 140.0 (130.0-150.0) |" in md
     assert "| other | `spec s_contacts.yaml; seed=1` | 1 | 9.00 (9-9) | 140.0 (140.0-140.0) |" in md
     assert "# Imitator A/B: s.yaml" in md and "the same env-step budget" in md
+
+
+def test_max_env_steps_compares_arms_over_the_same_range_and_marks_an_unfinished_arm(ab, tmp_path: Path):
+    """An arm that ran longer is cut to the common range before averaging; an interrupted arm says so."""
+    pt = {"minutes": 5.0, "clips_total": 15, "mpjpe_g_succ_mm": 80.0, "mpjpe_g_all_mm": 140.0, "tracked": ["walk"]}
+    long_pts = [pt | {"env_steps": s, "clips_tracked": c} for s, c in ((1_000_000, 9), (2_000_000, 11), (3_000_000, 5))]
+    long = tmp_path / "long.json"
+    long.write_text(json.dumps({"spec": "s.yaml", "overrides": [], "env_steps_budget": 3, "points": long_pts}))
+    short = tmp_path / "short.json"
+    short.write_text(json.dumps({"spec": "s.yaml", "overrides": ["g=1"], "env_steps_budget": 3, "training_finished": False, "points": long_pts[:2]}))
+    out = tmp_path / "ab.json"
+    assert ab.main(["--arm", f"long={long}", "--arm", f"short={short}", "--max-env-steps", "2000000", "--out", str(out)]) == 0
+    md = out.with_suffix(".md").read_text()
+    assert "| long | `(the spec as is)` | 2 | 10.00 (9-11) |" in md  # the 3M snapshot (5 clips) is left out
+    assert "short: the training did not finish" in md and "long: the training did not finish" not in md
+    assert json.loads(out.read_text())["max_env_steps"] == 2_000_000
+    with pytest.raises(SystemExit):
+        ab.main(["--arm", f"long={long}", "--max-env-steps", "10", "--out", str(out)])
