@@ -25,8 +25,9 @@ from pathlib import Path
 from typing import Any
 
 
-def training_tail(workdir: Path, last: int = 20) -> dict[str, float]:
-    """Mean of the last ``last`` PPO iterations' episode length/success/return in the arm's log."""
+def training_tail(workdir: Path, last: int = 20, max_env_steps: int | None = None) -> dict[str, float]:
+    """Mean of the last ``last`` PPO iterations' episode length/success/return in the arm's log (only
+    the iterations at or below ``max_env_steps`` when given)."""
     logs = sorted(workdir.glob("runs/*/metrics.jsonl"))
     rows = []
     for log in logs:
@@ -36,7 +37,8 @@ def training_tail(workdir: Path, last: int = 20) -> dict[str, float]:
             except json.JSONDecodeError:
                 continue
             if row.get("stage") == "imitator" and "episode/length" in row:
-                rows.append(row)
+                if max_env_steps is None or row.get("env_steps", 0) <= max_env_steps:
+                    rows.append(row)
     rows = rows[-last:]
     out: dict[str, float] = {"iterations": float(len(rows))}
     for key in ("episode/length", "episode/success", "episode/return", "steps_per_s", "lr", "std", "approx_kl"):
@@ -63,7 +65,7 @@ def load_arm(name: str, result: Path, workdir: Path | None, max_env_steps: int |
         "points": points,
     }
     if workdir is not None:
-        arm["training_last_20_iterations"] = training_tail(workdir)
+        arm["training_last_20_iterations"] = training_tail(workdir, max_env_steps=max_env_steps)
     return arm
 
 

@@ -81,3 +81,13 @@ def test_max_env_steps_compares_arms_over_the_same_range_and_marks_an_unfinished
     assert json.loads(out.read_text())["max_env_steps"] == 2_000_000
     with pytest.raises(SystemExit):
         ab.main(["--arm", f"long={long}", "--max-env-steps", "10", "--out", str(out)])
+
+
+def test_the_training_tail_is_cut_at_max_env_steps_too(ab, tmp_path: Path):
+    """With ``max_env_steps`` the last iterations are the last ones at or below it, not the run's end."""
+    work = tmp_path / "w"
+    (work / "runs" / "tts").mkdir(parents=True)
+    rows = [{"stage": "imitator", "env_steps": 1000 * (i + 1), "episode/length": 10.0 if i < 30 else 99.0} for i in range(40)]
+    (work / "runs" / "tts" / "metrics.jsonl").write_text("\n".join(json.dumps(r) for r in rows) + "\n")
+    assert ab.training_tail(work)["episode/length"] == pytest.approx((10 * 10 + 10 * 99) / 20)
+    assert ab.training_tail(work, max_env_steps=30_000)["episode/length"] == pytest.approx(10.0)
