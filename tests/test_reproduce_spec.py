@@ -32,6 +32,7 @@ def test_reproduce_spec_trains_everything_and_shares_the_imitator():
     # imitator _v7: _v6 continued by specs/imitator/continue_v6.yaml with 256 envs (tested below)
     covered = {"imitator_amp", "imitator_amp_v2", "imitator_amp_v3", "imitator_amp_v4", "imitator_amp_v5", "imitator_amp_v6", "vmp_amp_v2", "vmp_amp_m"}
     covered |= {"imitator_amp_v7", "pulse_amp_v7", "hybrid_rvq_amp_v7"}  # the v7 latent specs, tested below
+    covered |= {"imitator_amp_v8"}  # _v7 continued by continue_v7.yaml with gamma 0.99 (tested below)
     covered |= {"pulse_amp_v2", "pulse_amp_v4"}
     covered |= latents
     assert committed <= covered, f"committed checkpoints without a cell: {committed - covered}"
@@ -144,6 +145,29 @@ def test_imitator_v7_was_trained_by_continue_v6_with_the_larger_batch():
     params = follow.imitator.trainer.params
     assert (params["num_envs"], params["minibatch_size"]) == (256, 8192)
     assert Path(params["init_policy"]).resolve() == (ROOT / "checkpoints" / "imitator_amp_v7" / "policy.pt").resolve()
+
+
+def test_imitator_v8_was_trained_by_continue_v7_with_gamma_099():
+    """checkpoints/imitator_amp_v8 embeds continue_v7.yaml with gamma 0.99, from v7 on the same humanoid
+    variant; continue_v8.yaml continues it with that recipe (gamma 0.99, 256 envs)."""
+    import yaml
+
+    from mocap.checkpoint import load_checkpoint
+
+    data = load_checkpoint(ROOT / "checkpoints" / "imitator_amp_v8" / "policy.pt")
+    embedded = yaml.safe_load(data["spec"])
+    recipe = load_spec(ROOT / "specs" / "imitator" / "continue_v7.yaml", get_plugins()).spec
+    assert embedded["name"] == recipe.name
+    assert embedded["humanoid"]["params"]["shoulder_order"] == "xzy" == recipe.humanoid.params["shoulder_order"]
+    trainer = embedded["imitator"]["trainer"]["params"]
+    assert trainer["init_policy"] == "../imitator_amp_v7/policy.pt"
+    assert trainer["gamma"] == 0.99 and recipe.imitator.trainer.params["gamma"] == 0.95
+    assert data["extra"]["env_steps"] == 5013504
+    follow = load_spec(ROOT / "specs" / "imitator" / "continue_v8.yaml", get_plugins()).spec
+    assert follow.humanoid == recipe.humanoid
+    params = follow.imitator.trainer.params
+    assert (params["gamma"], params["num_envs"], params["minibatch_size"]) == (0.99, 256, 8192)
+    assert Path(params["init_policy"]).resolve() == (ROOT / "checkpoints" / "imitator_amp_v8" / "policy.pt").resolve()
 
 
 @pytest.mark.parametrize(("name", "getup"), [("pulse_amp_v7", False), ("pulse_amp_v7_getup", True), ("hybrid_rvq_amp_v7", True)])
