@@ -26,6 +26,10 @@ Nothing is lost on interruption: with ``--workdir`` every snapshot is listed in
 (``eval.json``, reused when newer than the snapshot). If the session ends mid-run, evaluate what
 was saved with ``--evaluate-only --workdir WORKDIR`` (the JSON then says the training did not
 finish, and at how many env steps it stopped).
+
+``--eval-motions deepmimic`` evaluates every snapshot on that motion source's default clips (all 15
+bundled) instead of the spec's: for a run trained on a subset of the clips (a curriculum phase), so
+that what it forgets shows too.
 """
 
 from __future__ import annotations
@@ -159,10 +163,13 @@ def train_steps(spec: Path, env_steps: int, snapshot_steps: int, checkpoint_ever
     return snaps
 
 
-def evaluate(snap: dict, work: Path) -> dict:
-    out = Path(snap["path"]).parent / "eval.json"
+def evaluate(snap: dict, work: Path, motions: str | None = None) -> dict:
+    """``mocap eval`` of one snapshot (on the training clips, or on the motion source ``motions`` with
+    its default params: e.g. all 15 bundled clips for a run trained on a subset)."""
+    out = Path(snap["path"]).parent / ("eval.json" if motions is None else f"eval_on_{motions}.json")
     if not out.exists() or out.stat().st_mtime < Path(snap["path"]).stat().st_mtime:
-        subprocess.run([sys.executable, "-m", "mocap", "eval", snap["path"], "--json", str(out)], check=True, capture_output=True)
+        cmd = [sys.executable, "-m", "mocap", "eval", snap["path"], "--json", str(out)]
+        subprocess.run(cmd + ([] if motions is None else ["--motions", motions]), check=True, capture_output=True)
     d = json.loads(out.read_text())
     agg = d["aggregate"]
     return {
@@ -211,6 +218,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--checkpoint-every", type=int, default=2, help="trainer iterations between checkpoints")
     ap.add_argument("--set", dest="overrides", action="append", default=[], help="extra spec override (repeatable)")
     ap.add_argument("--evaluate-only", action="store_true", help="no training: evaluate the snapshots listed in WORKDIR/snapshots.json")
+    ap.add_argument("--eval-motions", default=None, help="evaluate on this motion source's default clips instead of the training ones")
     ap.add_argument("--label", default="this checkout")
     ap.add_argument("--workdir", type=Path, default=None, help="keep the run and snapshots here (default: a temporary folder)")
     ap.add_argument("--out", type=Path, default=Path("bench/results/time_to_skill.json"))
@@ -238,7 +246,7 @@ def main(argv: list[str] | None = None) -> int:
     load_after = os.getloadavg()
     points = []
     for snap in snaps:
-        points.append(evaluate(snap, work))
+        points.append(evaluate(snap, work, args.eval_motions))
         p = points[-1]
         print(f"[{p['minutes']:5.1f} min, {p['env_steps'] / 1e6:.2f}M] {p['clips_tracked']}/{p['clips_total']} clips", flush=True)
     result = {
@@ -251,6 +259,7 @@ def main(argv: list[str] | None = None) -> int:
         "load_avg_before": None if args.evaluate_only else load_before,
         "load_avg_at_end_of_training": None if args.evaluate_only else load_after,
         "protocol": "mocap eval (mocap-imitation-v1), each snapshot evaluated after training",
+        "eval_motions": args.eval_motions,
         "training_finished": finished,
         "points": points,
         "versions": package_versions(),
