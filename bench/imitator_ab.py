@@ -63,6 +63,7 @@ def load_arm(name: str, result: Path, workdir: Path | None, max_env_steps: int |
         "load_avg_at_end_of_training": data.get("load_avg_at_end_of_training"),
         "training_finished": bool(data.get("training_finished", True)),
         "points": points,
+        "phases": data.get("phases") or [],
     }
     if workdir is not None:
         arm["training_last_20_iterations"] = training_tail(workdir, max_env_steps=max_env_steps)
@@ -90,6 +91,8 @@ def _f(v: Any, fmt: str = ".1f") -> str:
 def _lever(arm: dict[str, Any], spec: str | None) -> str:
     """What an arm changes: its own spec when it is not the table's, and its ``--set`` overrides
     (without ``torch_threads``, which changes the speed, not the training)."""
+    if len(arm.get("phases") or []) > 1:  # a curriculum (time_to_skill --after): each phase's lever and length
+        return " then ".join(f"{_lever({**ph, 'phases': []}, spec)} for {ph['env_steps'] / 1e6:.2f}M" for ph in arm["phases"])
     parts = [f"spec {arm['spec']}"] if arm.get("spec") and arm["spec"] != spec else []
     parts += [o for o in arm["overrides"] if "torch_threads=" not in o]
     return "; ".join(parts) or "(the spec as is)"

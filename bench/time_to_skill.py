@@ -30,6 +30,11 @@ finish, and at how many env steps it stopped).
 ``--eval-motions deepmimic`` evaluates every snapshot on that motion source's default clips (all 15
 bundled) instead of the spec's: for a run trained on a subset of the clips (a curriculum phase), so
 that what it forgets shows too.
+
+``--after PREV.json`` makes this run the next phase of PREV's (e.g. a curriculum: the hard clips, then
+all of them, started from PREV's last snapshot through ``--set imitator.trainer.params.init_policy=``):
+its snapshots are counted on from PREV's last env steps and minutes, PREV's points come first, and
+``phases`` lists each phase's spec, overrides and env steps.
 """
 
 from __future__ import annotations
@@ -182,6 +187,17 @@ def evaluate(snap: dict, work: Path, motions: str | None = None) -> dict:
     }
 
 
+def chain(prev: dict, points: list[dict], phase: dict) -> tuple[list[dict], list[dict]]:
+    """This phase's points counted on from the previous phase's last snapshot (env steps and minutes),
+    after that phase's points; the phases list (``--after``)."""
+    if not prev.get("points"):
+        raise SystemExit("error: --after: the previous phase's result has no snapshot")
+    last = prev["points"][-1]
+    moved = [{**p, "env_steps": p["env_steps"] + last["env_steps"], "minutes": p["minutes"] + last["minutes"]} for p in points]
+    before = prev.get("phases") or [{"spec": prev.get("spec"), "overrides": prev.get("overrides", []), "env_steps": last["env_steps"]}]
+    return prev["points"] + moved, [*before, phase]
+
+
 def plot(result: dict, path: Path) -> None:
     import matplotlib
 
@@ -219,6 +235,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--set", dest="overrides", action="append", default=[], help="extra spec override (repeatable)")
     ap.add_argument("--evaluate-only", action="store_true", help="no training: evaluate the snapshots listed in WORKDIR/snapshots.json")
     ap.add_argument("--eval-motions", default=None, help="evaluate on this motion source's default clips instead of the training ones")
+    ap.add_argument("--after", type=Path, default=None, help="result JSON of the phase this run continues (its points come first)")
     ap.add_argument("--label", default="this checkout")
     ap.add_argument("--workdir", type=Path, default=None, help="keep the run and snapshots here (default: a temporary folder)")
     ap.add_argument("--out", type=Path, default=Path("bench/results/time_to_skill.json"))
@@ -227,6 +244,8 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--eval-every must be > 0 and at most --minutes")
     if args.evaluate_only and (args.workdir is None or not (args.workdir / "snapshots.json").is_file()):
         ap.error("--evaluate-only needs --workdir holding the snapshots.json of an earlier run")
+    if args.after is not None and not args.after.is_file():
+        ap.error(f"--after {args.after}: no such result file")
     if args.env_steps is not None and (args.env_steps <= 0 or args.snapshot_steps <= 0):
         ap.error("--env-steps and --snapshot-steps must be > 0")
     os.environ.setdefault("MUJOCO_GL", "egl")
@@ -249,8 +268,13 @@ def main(argv: list[str] | None = None) -> int:
         points.append(evaluate(snap, work, args.eval_motions))
         p = points[-1]
         print(f"[{p['minutes']:5.1f} min, {p['env_steps'] / 1e6:.2f}M] {p['clips_tracked']}/{p['clips_total']} clips", flush=True)
+    phase = {"spec": str(args.spec), "overrides": args.overrides, "env_steps": points[-1]["env_steps"] if points else 0}
+    phases = [phase]
+    if args.after is not None:
+        points, phases = chain(json.loads(args.after.read_text()), points, phase)
     result = {
         "label": args.label,
+        "phases": phases,
         "spec": str(args.spec),
         "overrides": args.overrides,
         "minutes": args.minutes if args.env_steps is None else None,

@@ -91,3 +91,14 @@ def test_the_training_tail_is_cut_at_max_env_steps_too(ab, tmp_path: Path):
     (work / "runs" / "tts" / "metrics.jsonl").write_text("\n".join(json.dumps(r) for r in rows) + "\n")
     assert ab.training_tail(work)["episode/length"] == pytest.approx((10 * 10 + 10 * 99) / 20)
     assert ab.training_tail(work, max_env_steps=30_000)["episode/length"] == pytest.approx(10.0)
+
+
+def test_a_curriculum_arm_names_each_phase_and_its_length(ab):
+    phases = [
+        {"spec": "specs/imitator/curriculum_hard_v8.yaml", "overrides": [], "env_steps": 4_000_000},
+        {"spec": "s.yaml", "overrides": ["imitator.trainer.params.init_policy=/w/p.pt", "imitator.trainer.params.torch_threads=1"], "env_steps": 3_000_000},
+    ]
+    arm = {"spec": "s.yaml", "overrides": [], "phases": phases}
+    lever = ab._lever(arm, "s.yaml")
+    assert lever == "spec specs/imitator/curriculum_hard_v8.yaml for 4.00M then imitator.trainer.params.init_policy=/w/p.pt for 3.00M"
+    assert ab._lever({**arm, "phases": phases[:1]}, "s.yaml") == "(the spec as is)"  # one phase: the arm's own lever

@@ -70,3 +70,42 @@ def test_evaluate_reruns_when_the_snapshot_is_newer_than_its_eval(tmp_path: Path
 def test_evaluate_only_needs_a_workdir_with_a_snapshot_list(tmp_path: Path) -> None:
     with pytest.raises(SystemExit):
         tts.main(["--evaluate-only", "--workdir", str(tmp_path)])
+
+
+def test_eval_motions_evaluates_on_another_source_and_keeps_that_eval_apart(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A subset-trained snapshot (a curriculum phase) is evaluated on all clips with ``--motions``; its
+    evaluation on the training clips (eval.json) is neither reused for it nor overwritten."""
+    d = tmp_path / "snapshot_0001015808"
+    d.mkdir()
+    (d / "ppo.pt").write_bytes(b"not a checkpoint")
+    _fake_eval(d, succeeded=1)  # the training-clip evaluation, newer than the snapshot
+    calls: list[list[str]] = []
+
+    def fake_run(cmd, **kw):
+        calls.append(cmd)
+        out = Path(cmd[cmd.index("--json") + 1])
+        out.write_text(json.dumps({"aggregate": {"succeeded": 3, "total": 3, "mpjpe_g_succ": 70.0, "mpjpe_g": 70.0}, "clips": {}}))
+
+    monkeypatch.setattr(tts.subprocess, "run", fake_run)
+    p = tts.evaluate({"minutes": 1.0, "env_steps": 5, "path": str(d / "ppo.pt")}, tmp_path, motions="deepmimic")
+    assert len(calls) == 1 and calls[0][-2:] == ["--motions", "deepmimic"]
+    assert p["clips_tracked"] == 3 and (d / "eval_on_deepmimic.json").is_file()
+    assert json.loads((d / "eval.json").read_text())["aggregate"]["succeeded"] == 1
+
+
+def test_a_phase_after_another_is_counted_on_from_its_last_snapshot() -> None:
+    prev = {"spec": "hard.yaml", "overrides": [], "points": [{"minutes": 10.0, "env_steps": 1_000_000}, {"minutes": 21.0, "env_steps": 2_000_000}]}
+    points = [{"minutes": 9.5, "env_steps": 1_000_000, "clips_tracked": 12}]
+    phase = {"spec": "all.yaml", "overrides": ["imitator.trainer.params.init_policy=p.pt"], "env_steps": 1_000_000}
+    got, phases = tts.chain(prev, points, phase)
+    assert [p["env_steps"] for p in got] == [1_000_000, 2_000_000, 3_000_000]
+    assert got[-1]["minutes"] == pytest.approx(30.5) and got[-1]["clips_tracked"] == 12
+    assert phases == [{"spec": "hard.yaml", "overrides": [], "env_steps": 2_000_000}, phase]
+    assert points[0]["env_steps"] == 1_000_000  # the phase's own points are not changed in place
+    with pytest.raises(SystemExit, match="no snapshot"):
+        tts.chain({"points": []}, points, phase)
+
+
+def test_after_needs_an_existing_result(tmp_path: Path) -> None:
+    with pytest.raises(SystemExit):
+        tts.main(["--after", str(tmp_path / "missing.json"), "--env-steps", "10"])
