@@ -33,6 +33,7 @@ def test_reproduce_spec_trains_everything_and_shares_the_imitator():
     covered = {"imitator_amp", "imitator_amp_v2", "imitator_amp_v3", "imitator_amp_v4", "imitator_amp_v5", "imitator_amp_v6", "vmp_amp_v2", "vmp_amp_m"}
     covered |= {"imitator_amp_v7", "pulse_amp_v7", "hybrid_rvq_amp_v7"}  # the v7 latent specs, tested below
     covered |= {"imitator_amp_v8"}  # _v7 continued by continue_v7.yaml with gamma 0.99 (tested below)
+    covered |= {"imitator_amp_v10"}  # _v8 continued by continue_v8.yaml with a loose-to-tight termination (tested below)
     covered |= {"pulse_amp_v2", "pulse_amp_v4"}
     covered |= latents
     assert committed <= covered, f"committed checkpoints without a cell: {committed - covered}"
@@ -168,6 +169,29 @@ def test_imitator_v8_was_trained_by_continue_v7_with_gamma_099():
     params = follow.imitator.trainer.params
     assert (params["gamma"], params["num_envs"], params["minibatch_size"]) == (0.99, 256, 8192)
     assert Path(params["init_policy"]).resolve() == (ROOT / "checkpoints" / "imitator_amp_v8" / "policy.pt").resolve()
+
+
+def test_imitator_v10_was_trained_by_continue_v8_with_the_loose_termination():
+    """checkpoints/imitator_amp_v10 embeds continue_v8.yaml with the termination distance annealed from 1.0 m
+    over 5M env steps, from v8, at 3.01M steps; continue_v10.yaml carries on from where that schedule was."""
+    import yaml
+
+    from mocap.checkpoint import load_checkpoint
+
+    data = load_checkpoint(ROOT / "checkpoints" / "imitator_amp_v10" / "policy.pt")
+    embedded = yaml.safe_load(data["spec"])
+    recipe = load_spec(ROOT / "specs" / "imitator" / "continue_v8.yaml", get_plugins()).spec
+    assert embedded["name"] == recipe.name and recipe.imitator.params.get("termination_curriculum") is None
+    assert embedded["humanoid"]["params"]["shoulder_order"] == "xzy" == recipe.humanoid.params["shoulder_order"]
+    assert embedded["imitator"]["params"]["termination_curriculum"] == {"start": 1.0, "env_steps": 5000000}
+    assert embedded["imitator"]["trainer"]["params"]["init_policy"] == "../imitator_amp_v8/policy.pt"
+    assert data["extra"]["env_steps"] == 3014656
+    follow = load_spec(ROOT / "specs" / "imitator" / "continue_v10.yaml", get_plugins()).spec
+    assert follow.humanoid == recipe.humanoid
+    reached = 1.0 + (0.5 - 1.0) * 3014656 / 5000000  # where the linear schedule was at the snapshot
+    curriculum = follow.imitator.params["termination_curriculum"]
+    assert curriculum["start"] == pytest.approx(reached, abs=0.01) and curriculum["env_steps"] == 5000000 - 3000000
+    assert Path(follow.imitator.trainer.params["init_policy"]).resolve() == (ROOT / "checkpoints" / "imitator_amp_v10" / "policy.pt").resolve()
 
 
 @pytest.mark.parametrize(("name", "getup"), [("pulse_amp_v7", False), ("pulse_amp_v7_getup", True), ("hybrid_rvq_amp_v7", True)])
