@@ -17,7 +17,7 @@ Two result formats are read: ``bench/time_to_skill.py``'s (``points`` with ``env
         --segment v6=bench/results/imitator_ab_v4_shoulders_xzy.json \\
         --segment v7=bench/results/imitator_v7_curve.json@14024704 \\
         --segment v8=bench/results/imitator_ab_g99.json \\
-        --segment v10=bench/results/imitator_ab_loose.json@3014656 \\
+        --segment v11=bench/results/imitator_ab_hard_remix.json@13041664 \\
         --out bench/results/imitator_lineage
 
 ``NAME=FILE[@STEPS]``: ``@STEPS`` cuts the segment at that env-step count (the snapshot the next

@@ -34,6 +34,7 @@ def test_reproduce_spec_trains_everything_and_shares_the_imitator():
     covered |= {"imitator_amp_v7", "pulse_amp_v7", "hybrid_rvq_amp_v7"}  # the v7 latent specs, tested below
     covered |= {"imitator_amp_v8"}  # _v7 continued by continue_v7.yaml with gamma 0.99 (tested below)
     covered |= {"imitator_amp_v10"}  # _v8 continued by continue_v8.yaml with a loose-to-tight termination (tested below)
+    covered |= {"imitator_amp_v11"}  # _v8 through the hard-clip curriculum, then continue_v8.yaml (tested below)
     covered |= {"pulse_amp_v2", "pulse_amp_v4"}
     covered |= latents
     assert committed <= covered, f"committed checkpoints without a cell: {committed - covered}"
@@ -216,3 +217,25 @@ def test_the_v7_latent_specs_differ_from_the_v4_ones_by_teacher_humanoid_and_get
     a, b = v4.imitator.model_dump(), v7.imitator.model_dump()
     a.pop("checkpoint"), b.pop("checkpoint")
     assert a == b
+
+
+def test_imitator_v11_ends_with_continue_v8_on_all_clips_after_the_hard_clip_curriculum():
+    """checkpoints/imitator_amp_v11 embeds continue_v8.yaml as is (its last phase, on the 15 clips), started from
+    the curriculum's policy; curriculum_hard_v8.yaml differs from continue_v8.yaml only by its clips (and name);
+    continue_v11.yaml continues v11 with the last phase's recipe."""
+    import yaml
+
+    from mocap.checkpoint import load_checkpoint
+
+    data = load_checkpoint(ROOT / "checkpoints" / "imitator_amp_v11" / "policy.pt")
+    embedded = yaml.safe_load(data["spec"])
+    recipe = load_spec(ROOT / "specs" / "imitator" / "continue_v8.yaml", get_plugins()).spec
+    assert embedded["name"] == recipe.name and embedded["motions"]["params"].get("clips") is None
+    assert embedded["imitator"]["params"]["termination_curriculum"] is None
+    assert embedded["imitator"]["trainer"]["params"]["init_policy"].endswith("hard_policy.pt")
+    hard = load_spec(ROOT / "specs" / "imitator" / "curriculum_hard_v8.yaml", get_plugins()).spec
+    assert hard.motions.params["clips"] == ["backflip", "dance_a", "dance_b", "spin", "getup_faceup", "getup_facedown"]
+    assert hard.imitator == recipe.imitator and hard.humanoid == recipe.humanoid
+    follow = load_spec(ROOT / "specs" / "imitator" / "continue_v11.yaml", get_plugins()).spec
+    assert follow.humanoid == recipe.humanoid and follow.imitator.params == recipe.imitator.params
+    assert Path(follow.imitator.trainer.params["init_policy"]).resolve() == (ROOT / "checkpoints" / "imitator_amp_v11" / "policy.pt").resolve()
