@@ -221,7 +221,8 @@ def test_the_v7_latent_specs_differ_from_the_v4_ones_by_teacher_humanoid_and_get
 
 def test_imitator_v11_ends_with_continue_v8_on_all_clips_after_the_hard_clip_curriculum():
     """checkpoints/imitator_amp_v11 embeds continue_v8.yaml as is (its last phase, on the 15 clips), started from
-    the curriculum's policy; curriculum_hard_v8.yaml differs from continue_v8.yaml only by its clips (and name);
+    the curriculum's policy, committed next to it with its first phase (each names the policy it started
+    from); curriculum_hard_v8.yaml differs from continue_v8.yaml only by its clips (and name);
     continue_v11.yaml continues v11 with the last phase's recipe."""
     import yaml
 
@@ -232,9 +233,13 @@ def test_imitator_v11_ends_with_continue_v8_on_all_clips_after_the_hard_clip_cur
     recipe = load_spec(ROOT / "specs" / "imitator" / "continue_v8.yaml", get_plugins()).spec
     assert embedded["name"] == recipe.name and embedded["motions"]["params"].get("clips") is None
     assert embedded["imitator"]["params"]["termination_curriculum"] is None
-    assert embedded["imitator"]["trainer"]["params"]["init_policy"].endswith("hard_policy.pt")
+    assert embedded["imitator"]["trainer"]["params"]["init_policy"] == "curriculum_phase2.pt"
+    hard_clips = ["backflip", "dance_a", "dance_b", "spin", "getup_faceup", "getup_facedown"]
+    for phase, start in (("curriculum_phase2.pt", "curriculum_phase1.pt"), ("curriculum_phase1.pt", "../imitator_amp_v8/policy.pt")):
+        doc = yaml.safe_load(load_checkpoint(ROOT / "checkpoints" / "imitator_amp_v11" / phase)["spec"])
+        assert doc["motions"]["params"]["clips"] == hard_clips and doc["imitator"]["trainer"]["params"]["init_policy"] == start
     hard = load_spec(ROOT / "specs" / "imitator" / "curriculum_hard_v8.yaml", get_plugins()).spec
-    assert hard.motions.params["clips"] == ["backflip", "dance_a", "dance_b", "spin", "getup_faceup", "getup_facedown"]
+    assert hard.motions.params["clips"] == hard_clips
     assert hard.imitator == recipe.imitator and hard.humanoid == recipe.humanoid
     follow = load_spec(ROOT / "specs" / "imitator" / "continue_v11.yaml", get_plugins()).spec
     assert follow.humanoid == recipe.humanoid and follow.imitator.params == recipe.imitator.params
