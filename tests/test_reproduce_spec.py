@@ -17,6 +17,16 @@ ROOT = Path(__file__).resolve().parents[1]
 SPEC = ROOT / "specs" / "reproduce" / "bundled.yaml"
 
 
+def _checkpoint(name: str, file: str = "policy.pt") -> tuple[dict, dict]:
+    """A committed checkpoint's contents and the spec it embeds (parsed)."""
+    import yaml
+
+    from mocap.checkpoint import load_checkpoint
+
+    data = load_checkpoint(ROOT / "checkpoints" / name / file)
+    return data, yaml.safe_load(data["spec"])
+
+
 def test_reproduce_spec_trains_everything_and_shares_the_imitator():
     plugins = get_plugins()
     cells = {cell.name: resolved for cell, resolved in load_cells(SPEC, plugins)}
@@ -95,11 +105,7 @@ def test_the_v4_latent_specs_differ_from_their_recipe_only_by_teacher_and_thread
 
 def test_imitator_v5_was_trained_by_the_committed_getup_recipe_from_v4():
     """checkpoints/imitator_amp_v5 embeds the spec that trained it: continue_v4_contacts_getup.yaml, from v4."""
-    import yaml
-
-    from mocap.checkpoint import load_checkpoint
-
-    embedded = yaml.safe_load(load_checkpoint(ROOT / "checkpoints" / "imitator_amp_v5" / "policy.pt")["spec"])
+    _, embedded = _checkpoint("imitator_amp_v5")
     recipe = load_spec(ROOT / "specs" / "imitator" / "continue_v4_contacts_getup.yaml", get_plugins()).spec
     assert embedded["name"] == recipe.name
     params = embedded["imitator"]["params"]
@@ -111,11 +117,7 @@ def test_imitator_v5_was_trained_by_the_committed_getup_recipe_from_v4():
 def test_imitator_v6_was_trained_by_the_shoulders_recipe_on_its_humanoid():
     """checkpoints/imitator_amp_v6 embeds continue_v4_shoulders.yaml: the x-z-y humanoid variant, from v4;
     continue_v6.yaml continues it on the same humanoid."""
-    import yaml
-
-    from mocap.checkpoint import load_checkpoint
-
-    embedded = yaml.safe_load(load_checkpoint(ROOT / "checkpoints" / "imitator_amp_v6" / "policy.pt")["spec"])
+    _, embedded = _checkpoint("imitator_amp_v6")
     recipe = load_spec(ROOT / "specs" / "imitator" / "continue_v4_shoulders.yaml", get_plugins()).spec
     assert embedded["name"] == recipe.name
     assert embedded["humanoid"]["params"]["shoulder_order"] == "xzy" == recipe.humanoid.params["shoulder_order"]
@@ -129,12 +131,7 @@ def test_imitator_v6_was_trained_by_the_shoulders_recipe_on_its_humanoid():
 def test_imitator_v7_was_trained_by_continue_v6_with_the_larger_batch():
     """checkpoints/imitator_amp_v7 embeds continue_v6.yaml with 256 envs and minibatches of 8192, from v6 on
     the same humanoid variant; continue_v7.yaml continues it with that recipe and batch."""
-    import yaml
-
-    from mocap.checkpoint import load_checkpoint
-
-    data = load_checkpoint(ROOT / "checkpoints" / "imitator_amp_v7" / "policy.pt")
-    embedded = yaml.safe_load(data["spec"])
+    data, embedded = _checkpoint("imitator_amp_v7")
     recipe = load_spec(ROOT / "specs" / "imitator" / "continue_v6.yaml", get_plugins()).spec
     assert embedded["name"] == recipe.name
     assert embedded["humanoid"]["params"]["shoulder_order"] == "xzy" == recipe.humanoid.params["shoulder_order"]
@@ -152,12 +149,7 @@ def test_imitator_v7_was_trained_by_continue_v6_with_the_larger_batch():
 def test_imitator_v8_was_trained_by_continue_v7_with_gamma_099():
     """checkpoints/imitator_amp_v8 embeds continue_v7.yaml with gamma 0.99, from v7 on the same humanoid
     variant; continue_v8.yaml continues it with that recipe (gamma 0.99, 256 envs)."""
-    import yaml
-
-    from mocap.checkpoint import load_checkpoint
-
-    data = load_checkpoint(ROOT / "checkpoints" / "imitator_amp_v8" / "policy.pt")
-    embedded = yaml.safe_load(data["spec"])
+    data, embedded = _checkpoint("imitator_amp_v8")
     recipe = load_spec(ROOT / "specs" / "imitator" / "continue_v7.yaml", get_plugins()).spec
     assert embedded["name"] == recipe.name
     assert embedded["humanoid"]["params"]["shoulder_order"] == "xzy" == recipe.humanoid.params["shoulder_order"]
@@ -175,12 +167,7 @@ def test_imitator_v8_was_trained_by_continue_v7_with_gamma_099():
 def test_imitator_v10_was_trained_by_continue_v8_with_the_loose_termination():
     """checkpoints/imitator_amp_v10 embeds continue_v8.yaml with the termination distance annealed from 1.0 m
     over 5M env steps, from v8, at 3.01M steps; continue_v10.yaml carries on from where that schedule was."""
-    import yaml
-
-    from mocap.checkpoint import load_checkpoint
-
-    data = load_checkpoint(ROOT / "checkpoints" / "imitator_amp_v10" / "policy.pt")
-    embedded = yaml.safe_load(data["spec"])
+    data, embedded = _checkpoint("imitator_amp_v10")
     recipe = load_spec(ROOT / "specs" / "imitator" / "continue_v8.yaml", get_plugins()).spec
     assert embedded["name"] == recipe.name and recipe.imitator.params.get("termination_curriculum") is None
     assert embedded["humanoid"]["params"]["shoulder_order"] == "xzy" == recipe.humanoid.params["shoulder_order"]
@@ -224,19 +211,14 @@ def test_imitator_v11_ends_with_continue_v8_on_all_clips_after_the_hard_clip_cur
     the curriculum's policy, committed next to it with its first phase (each names the policy it started
     from); curriculum_hard_v8.yaml differs from continue_v8.yaml only by its clips (and name);
     continue_v11.yaml continues v11 with the last phase's recipe."""
-    import yaml
-
-    from mocap.checkpoint import load_checkpoint
-
-    data = load_checkpoint(ROOT / "checkpoints" / "imitator_amp_v11" / "policy.pt")
-    embedded = yaml.safe_load(data["spec"])
+    data, embedded = _checkpoint("imitator_amp_v11")
     recipe = load_spec(ROOT / "specs" / "imitator" / "continue_v8.yaml", get_plugins()).spec
     assert embedded["name"] == recipe.name and embedded["motions"]["params"].get("clips") is None
     assert embedded["imitator"]["params"]["termination_curriculum"] is None
     assert embedded["imitator"]["trainer"]["params"]["init_policy"] == "curriculum_phase2.pt"
     hard_clips = ["backflip", "dance_a", "dance_b", "spin", "getup_faceup", "getup_facedown"]
     for phase, start in (("curriculum_phase2.pt", "curriculum_phase1.pt"), ("curriculum_phase1.pt", "../imitator_amp_v8/policy.pt")):
-        doc = yaml.safe_load(load_checkpoint(ROOT / "checkpoints" / "imitator_amp_v11" / phase)["spec"])
+        _, doc = _checkpoint("imitator_amp_v11", phase)
         assert doc["motions"]["params"]["clips"] == hard_clips and doc["imitator"]["trainer"]["params"]["init_policy"] == start
     hard = load_spec(ROOT / "specs" / "imitator" / "curriculum_hard_v8.yaml", get_plugins()).spec
     assert hard.motions.params["clips"] == hard_clips
