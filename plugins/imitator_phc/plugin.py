@@ -77,7 +77,7 @@ def register_commands(app: Any) -> None:
         from mocap.eval_targets import build_evaluation_target, load_evaluation_target
         from mocap.plugins import get_plugins
         from mocap_phc.recovery_eval import RecoveryEvalParams, evaluate_recovery
-        from mocap_phc.recovery_planner import GetUpPlannerParams
+        from mocap_phc.recovery_planner import GetUpPlanner, GetUpPlannerParams
 
         console = Console(stderr=True)
         plugins = get_plugins()
@@ -94,6 +94,11 @@ def register_commands(app: Any) -> None:
         if planner not in ("none", "getup"):
             raise UserError(f"--planner must be 'none' or 'getup', not {planner!r}")
         plan = GetUpPlannerParams() if planner == "getup" else None
+        if plan is not None:
+            try:  # the planner needs get-up clips and a looping approach clip in the target's motion set
+                GetUpPlanner(loaded.library, plan, 1, 1.0 / 30.0)
+            except ValueError as err:
+                raise UserError(f"{target}: --planner getup: {err}; it runs on the motion set the policy was trained on") from None
         params = RecoveryEvalParams(trials=trials, seconds=seconds, reference=reference, clip=clip, far_prob=far_prob, seed=seed, planner=plan)
         recorder = None
         if video is not None:
