@@ -18,6 +18,7 @@ Two result formats are read: ``bench/time_to_skill.py``'s (``points`` with ``env
         --segment v7=bench/results/imitator_v7_curve.json@14024704 \\
         --segment v8=bench/results/imitator_ab_g99.json \\
         --segment v11=bench/results/imitator_ab_hard_remix.json@13041664 \\
+        --segment v12=bench/results/imitator_ab_cycles.json \\
         --out bench/results/imitator_lineage
 
 ``NAME=FILE[@STEPS]``: ``@STEPS`` cuts the segment at that env-step count (the snapshot the next

@@ -42,9 +42,11 @@ def test_reproduce_spec_trains_everything_and_shares_the_imitator():
     # imitator _v7: _v6 continued by specs/imitator/continue_v6.yaml with 256 envs (tested below)
     covered = {"imitator_amp", "imitator_amp_v2", "imitator_amp_v3", "imitator_amp_v4", "imitator_amp_v5", "imitator_amp_v6", "vmp_amp_v2", "vmp_amp_m"}
     covered |= {"imitator_amp_v7", "pulse_amp_v7", "hybrid_rvq_amp_v7"}  # the v7 latent specs, tested below
+    covered |= {"pulse_amp_v11", "hybrid_rvq_amp_v11"}  # the v11 latent specs, tested below
     covered |= {"imitator_amp_v8"}  # _v7 continued by continue_v7.yaml with gamma 0.99 (tested below)
     covered |= {"imitator_amp_v10"}  # _v8 continued by continue_v8.yaml with a loose-to-tight termination (tested below)
     covered |= {"imitator_amp_v11"}  # _v8 through the hard-clip curriculum, then continue_v8.yaml (tested below)
+    covered |= {"imitator_amp_v12"}  # _v11 after two curriculum cycles (curriculum_hard_v11.yaml, continue_v11.yaml; tested below)
     covered |= {"pulse_amp_v2", "pulse_amp_v4"}
     covered |= latents
     assert committed <= covered, f"committed checkpoints without a cell: {committed - covered}"
@@ -226,3 +228,42 @@ def test_imitator_v11_ends_with_continue_v8_on_all_clips_after_the_hard_clip_cur
     follow = load_spec(ROOT / "specs" / "imitator" / "continue_v11.yaml", get_plugins()).spec
     assert follow.humanoid == recipe.humanoid and follow.imitator.params == recipe.imitator.params
     assert Path(follow.imitator.trainer.params["init_policy"]).resolve() == (ROOT / "checkpoints" / "imitator_amp_v11" / "policy.pt").resolve()
+
+
+@pytest.mark.parametrize("family", ["pulse", "hybrid_rvq"])
+def test_the_v11_latent_specs_differ_from_the_v7_ones_only_by_the_teacher(family):
+    """specs/latent/<family>_amp_v11.yaml: the v7 recipe (sizes, schedule, humanoid, fallen starts) with
+    imitator_amp_v11 as the teacher; nothing else changed."""
+    plugins = get_plugins()
+    v7 = load_spec(ROOT / "specs" / "latent" / f"{family}_amp_v7.yaml", plugins).spec
+    v11 = load_spec(ROOT / "specs" / "latent" / f"{family}_amp_v11.yaml", plugins).spec
+    assert Path(v11.imitator.checkpoint).resolve() == (ROOT / "checkpoints" / "imitator_amp_v11" / "policy.pt").resolve()
+    assert v11.latent == v7.latent and v11.humanoid == v7.humanoid and v11.motions == v7.motions
+    assert v11.imitator.model_copy(update={"checkpoint": None}) == v7.imitator.model_copy(update={"checkpoint": None})
+
+
+def test_curriculum_hard_v11_is_continue_v11_on_the_hard_clips():
+    """The cycles' hard phase: continue_v11.yaml (from v11) on the five hardest clips and the two get-ups."""
+    plugins = get_plugins()
+    follow = load_spec(ROOT / "specs" / "imitator" / "continue_v11.yaml", plugins).spec
+    hard = load_spec(ROOT / "specs" / "imitator" / "curriculum_hard_v11.yaml", plugins).spec
+    assert hard.motions.params["clips"] == ["backflip", "dance_a", "dance_b", "spin", "roll", "getup_faceup", "getup_facedown"]
+    assert hard.imitator == follow.imitator and hard.humanoid == follow.humanoid
+
+
+def test_imitator_v12_is_two_curriculum_cycles_from_v11():
+    """checkpoints/imitator_amp_v12 embeds continue_v11.yaml's recipe on the 15 clips; the phases before it are
+    committed next to it, each naming the policy it started from: curriculum_hard_v11.yaml (from the
+    committed v11), continue_v11.yaml's recipe, curriculum_hard_v11.yaml again. continue_v12.yaml continues
+    v12 with that recipe."""
+    recipe = load_spec(ROOT / "specs" / "imitator" / "continue_v11.yaml", get_plugins()).spec
+    hard = load_spec(ROOT / "specs" / "imitator" / "curriculum_hard_v11.yaml", get_plugins()).spec
+    chain = [("policy.pt", recipe, "curriculum_phase3.pt"), ("curriculum_phase3.pt", hard, "curriculum_phase2.pt")]
+    chain += [("curriculum_phase2.pt", recipe, "curriculum_phase1.pt"), ("curriculum_phase1.pt", hard, "../imitator_amp_v11/policy.pt")]
+    for file, spec, start in chain:
+        _, doc = _checkpoint("imitator_amp_v12", file)
+        assert doc["name"] == spec.name and doc["motions"]["params"].get("clips") == spec.motions.params.get("clips"), file
+        assert doc["imitator"]["trainer"]["params"]["init_policy"] == start, file
+    follow = load_spec(ROOT / "specs" / "imitator" / "continue_v12.yaml", get_plugins()).spec
+    assert follow.motions == recipe.motions and follow.imitator.params == recipe.imitator.params
+    assert Path(follow.imitator.trainer.params["init_policy"]).resolve() == (ROOT / "checkpoints" / "imitator_amp_v12" / "policy.pt").resolve()
