@@ -6,7 +6,8 @@ random generation, from the JSON files of ``mocap eval --json`` and ``mocap gene
         --entry pulse=checkpoints/pulse_amp/eval.json,checkpoints/pulse_amp/generation.json
 
 Each ``--entry NAME=EVAL_JSON[,GENERATION_JSON]``; the teacher row comes from the first eval file
-(``mocap eval`` of a latent embeds its teacher's table). Writes ``<out>.json`` and ``<out>.md``.
+(``mocap eval`` of a latent embeds its teacher's table); entries distilled from different teachers
+get one teacher row each, before the first entry of that teacher. Writes ``<out>.json`` and ``<out>.md``.
 """
 
 from __future__ import annotations
@@ -47,22 +48,27 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     rows: dict[str, dict] = {}
     teacher = None
+    teachers: dict[str, dict] = {}  # a row per distinct teacher, named after the first entry distilled from it
     for item in args.entry:
         name, files = item.split("=", 1)
         paths = files.split(",")
         ev = json.loads(Path(paths[0]).read_text())
         gen = json.loads(Path(paths[1]).read_text()) if len(paths) > 1 else None
-        if teacher is None and "imitator" in ev:
-            teacher = row(ev["imitator"], None)
+        if "imitator" in ev:
+            own = row(ev["imitator"], None)
+            teacher = own if teacher is None else teacher
+            if json.dumps(own, sort_keys=True) not in {json.dumps(t, sort_keys=True) for t in teachers.values()}:
+                teachers[name] = own
         rows[name] = row(ev, gen)
-    table = {"teacher": teacher, "latents": rows, "sources": args.entry}
+    table = {"teacher": teacher, "teachers": teachers, "latents": rows, "sources": args.entry}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.with_suffix(".json").write_text(json.dumps(table, indent=2) + "\n")
     cols = ["succeeded", "kept_teacher_clips", "mpjpe_g", "mpjpe_g_succ", "mpjpe_g_ratio_on_shared", "mpjpe_l", "rot_err", *GENERATION]
     lines = ["| policy | " + " | ".join(cols) + " |", "|" + "---|" * (len(cols) + 1)]
-    if teacher:
-        lines.append("| imitator (teacher) | " + " | ".join(fmt(teacher.get(c)) for c in cols) + " |")
     for name, r in rows.items():
+        if name in teachers:  # the teacher's row before the first latent distilled from it
+            label = "imitator (teacher)" if len(teachers) == 1 else f"imitator (teacher of {name})"
+            lines.append(f"| {label} | " + " | ".join(fmt(teachers[name].get(c)) for c in cols) + " |")
         lines.append(f"| {name} | " + " | ".join(fmt(r.get(c)) for c in cols) + " |")
     args.out.with_suffix(".md").write_text(
         "# Latent spaces vs their teacher (bundled clips)\n\nImitation: mocap-imitation-v1 (15 clips, mm, "

@@ -42,7 +42,6 @@ def test_reproduce_spec_trains_everything_and_shares_the_imitator():
     # imitator _v7: _v6 continued by specs/imitator/continue_v6.yaml with 256 envs (tested below)
     covered = {"imitator_amp", "imitator_amp_v2", "imitator_amp_v3", "imitator_amp_v4", "imitator_amp_v5", "imitator_amp_v6", "vmp_amp_v2", "vmp_amp_m"}
     covered |= {"imitator_amp_v7", "pulse_amp_v7", "hybrid_rvq_amp_v7"}  # the v7 latent specs, tested below
-    covered |= {"pulse_amp_v11", "hybrid_rvq_amp_v11"}  # the v11 latent specs, tested below
     covered |= {"imitator_amp_v8"}  # _v7 continued by continue_v7.yaml with gamma 0.99 (tested below)
     covered |= {"imitator_amp_v10"}  # _v8 continued by continue_v8.yaml with a loose-to-tight termination (tested below)
     covered |= {"imitator_amp_v11"}  # _v8 through the hard-clip curriculum, then continue_v8.yaml (tested below)
