@@ -27,8 +27,18 @@ import torch
 from torch import Tensor
 
 from mocap.motion.transform import frames_at_rate, match_first_frames, yaw_frames
+from mocap.errors import UserError
 from mocap.fail_state_params import GetUpStartParams
 from mocap.state import HumanoidState, MotionFrames
+
+
+class NoGetUpClip(UserError, ValueError):
+    """A get-up setting whose patterns match no clip of the motion set (the user's spec or options)."""
+
+
+def getup_clip_names(names: list[str], patterns: list[str]) -> list[str]:
+    """The clip ``names`` that match one of the fnmatch ``patterns`` (case-sensitive)."""
+    return [name for name in names if any(fnmatch.fnmatchcase(name, pat) for pat in patterns)]
 
 
 class GetUpClips:
@@ -37,9 +47,10 @@ class GetUpClips:
 
     def __init__(self, library: Any, patterns: list[str], who: str = "getup_starts"):
         names = list(library.clip_names)
-        self.clips = torch.tensor([i for i, name in enumerate(names) if any(fnmatch.fnmatchcase(name, pat) for pat in patterns)], dtype=torch.long)
+        wanted = set(getup_clip_names(names, patterns))
+        self.clips = torch.tensor([i for i, name in enumerate(names) if name in wanted], dtype=torch.long)
         if not len(self.clips):
-            raise ValueError(f"{who}: no clip matches {patterns} (clips: {', '.join(names)})")
+            raise NoGetUpClip(f"{who}: no clip matches {patterns} (clips: {', '.join(names)})")
         zero = torch.zeros(len(self.clips), dtype=library.dtype, device=library.device)
         first = library.frames(self.clips.to(library.device), zero)
         self._first_rot = first.root_rot.double().cpu()

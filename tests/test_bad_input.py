@@ -119,6 +119,17 @@ def test_recover_with_the_getup_planner_on_a_motion_set_without_getups_is_one_li
 PULSE_SMALL = {"encoder_hidden": [8], "prior_hidden": [8], "decoder_hidden": [8]}
 
 
+def test_run_with_getup_starts_on_a_motion_set_without_getups_is_one_line(tmp_path):
+    """``getup_starts`` whose patterns match no clip: one error line, not a stage traceback."""
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(
+        AMP_SPEC.replace(
+            "params: {action: residual}", "params: {action: residual, fail_states: {fall_init_prob: 0.5}, getup_starts: {clips: ['getup*']}}"
+        ).replace("trainer: {name: ppo}", "trainer: {name: ppo, params: {num_envs: 2, horizon: 8, total_env_steps: 16, minibatch_size: 8}}")
+    )
+    assert_one_line_error(invoke(["run", spec, "--out", tmp_path / "runs"]), "getup_starts", "no clip matches ['getup*']")
+
+
 def test_eval_latent_with_another_latent_dim_names_both_sides(tmp_path, amp_policy, amp):
     from mocap.distill_files import save_latent
 

@@ -478,3 +478,23 @@ def test_pmcp_phases_continue_one_discriminator(tmp_path):
     comp_updates = comp["env"]["amp"]["trainer"]["updates"]
     assert prim_updates > 0 and comp_updates > prim_updates, (prim_updates, comp_updates)
     assert "discriminator continues from prim0" in result.output
+
+
+def test_pmcp_subsets_without_a_getup_clip_drop_getup_starts(tmp_path):
+    """With the imitator's ``getup_starts``, PMCP's envs on clip subsets that hold no get-up clip (the
+    one-clip probe, per-subset evaluations, P(F)'s walk-only set here) train and evaluate without those
+    starts instead of failing; the full motion set keeps them (it has the get-up clip)."""
+    from mocap.testing import invoke
+
+    text = RECOVERY_SPEC.replace("clips: [walk, kick]}", "clips: [walk, kick, getup_faceup]}").replace(
+        "recovery_goal: {form: paper}}",
+        "recovery_goal: {form: paper}, fail_states: {fall_init_prob: 0.5, pool_size: 4, settle_steps: 10}, getup_starts: {clips: ['getup*']}}",
+    )
+    assert "getup_starts" in text and "getup_faceup" in text
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(text)
+    result = invoke(["run", spec, "--out", tmp_path / "runs" / "r"])
+    assert result.exit_code == 0, result.output
+    final = Path(json.loads((tmp_path / "runs" / "r" / "stages.json").read_text())[0]["checkpoint"])
+    prims = json.loads((final.parent / "pmcp_state.json").read_text())["primitives"]
+    assert prims[1]["recovery"] is True and prims[1]["clip_ids"] == [0]  # P(F) on walk alone

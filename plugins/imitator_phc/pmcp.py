@@ -153,7 +153,21 @@ class PMCPTrainer(Trainer):
         def eval_sim(n: int) -> Any:
             return ctx.build("simulator", skeleton=sk, num_envs=n, seed=seed)
 
-        return ImitationEnv(params if params is not None else self.component.params, sk, self._library(ids), sim, seed=seed, eval_simulator_factory=eval_sim)
+        params = self._subset_params(params if params is not None else self.component.params, ids)
+        return ImitationEnv(params, sk, self._library(ids), sim, seed=seed, eval_simulator_factory=eval_sim)
+
+    def _subset_params(self, params: Any, ids: Sequence[int]) -> Any:
+        """``params`` for an env on clips ``ids`` only: without ``getup_starts`` when none of them is a
+        get-up clip (a probe, an evaluation, a hard set or P(F)'s set may lack one; those fallen starts
+        need a get-up clip to track). The full motion set keeps the user's check (a clear error)."""
+        from mocap.getup_starts import getup_clip_names
+
+        starts = params.getup_starts
+        if starts is None or len(ids) == len(self.clip_names):
+            return params
+        if getup_clip_names([self.clip_names[i] for i in ids], list(starts.clips)):
+            return params
+        return params.model_copy(update={"getup_starts": None})
 
     def _recovery_params(self, fail_states: FailStateParams | None) -> Any:
         """The imitator's params with fallen/far starts and the point-goal reward while far (PHC Eq. 4)."""
