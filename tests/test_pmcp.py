@@ -441,6 +441,7 @@ def test_pmcp_getup_phase_runs_before_the_point_goal_phase(tmp_path):
 
 
 def test_pmcp_getup_params_are_the_codes_phase_one():
+    from mocap.errors import UserError
     from mocap_phc.imitator import PHCParams
     from mocap_phc.pmcp import GetupPhaseParams, PMCPParams, PMCPTrainer, RecoveryPhaseParams
 
@@ -456,8 +457,14 @@ def test_pmcp_getup_params_are_the_codes_phase_one():
     assert got.recovery_goal is not None and got.recovery_goal.form == "paper"
     bad = PMCPTrainer(PMCPParams(recovery=RecoveryPhaseParams(getup=GetupPhaseParams(imitator={"amp_lr": -1.0}))))
     bad.component = trainer.component
-    with pytest.raises(ValidationError):  # overrides are validated as the imitator's params
+    with pytest.raises(UserError, match="recovery.getup.imitator"):  # validated as the imitator's params: one error line
         bad._getup_params()
+    # the default overrides drop get-up starts (they track a get-up clip, which AMP excludes)
+    base = PHCParams(recovery_goal={"form": "paper"}, energy_coef=0.0, fail_states={"fall_init_prob": 0.1}, getup_starts={"clips": ["getup*"]})
+    default = PMCPTrainer(PMCPParams(recovery=RecoveryPhaseParams(getup=GetupPhaseParams())))
+    default.component = type("C", (), {"params": base})()
+    got = default._getup_params()
+    assert got.amp and got.getup_starts is None
 
 
 def test_pmcp_phases_continue_one_discriminator(tmp_path):

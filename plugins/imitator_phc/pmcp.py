@@ -77,6 +77,7 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import torch
+from pydantic import ValidationError
 from torch import Tensor
 
 from mocap.checkpoint import atomic_write_json, atomic_write_text, load_checkpoint, save_checkpoint
@@ -138,6 +139,8 @@ class PMCPTrainer(Trainer):
                 "pmcp recovery needs the fail-state goal switch: set imitator.params.recovery_goal (e.g. {form: paper}); "
                 "every primitive and the composer observe through it"
             )
+        if self.params.recovery is not None and self.params.recovery.getup is not None:
+            self._getup_params()  # checked before primitive 0's evaluation and P(F), not hours into the run
 
     def _library(self, ids: Sequence[int]) -> Any:
         from mocap.motion.library import MotionLibrary
@@ -342,7 +345,13 @@ class PMCPTrainer(Trainer):
         rec = self.params.recovery
         assert rec is not None and rec.getup is not None
         base = self._recovery_params(rec.getup.fail_states)
-        return type(base).model_validate({**base.model_dump(), **rec.getup.imitator})
+        try:
+            return type(base).model_validate({**base.model_dump(), **rec.getup.imitator})
+        except ValidationError as exc:
+            from mocap.errors import UserError
+
+            why = "; ".join(str(e["msg"]) for e in exc.errors())
+            raise UserError(f"pmcp recovery.getup.imitator: the get-up phase's imitator params are invalid: {why}") from None
 
     def _train_primitive(self, state: dict[str, Any], prim: dict[str, Any], getup: bool = False) -> bool:
         """Train primitive ``prim`` until it should be frozen; freeze it. False when stopped by the user.

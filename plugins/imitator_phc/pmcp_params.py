@@ -25,7 +25,7 @@ def _getup_fail_default() -> FailStateParams:
 
 
 def _getup_imitator_default() -> dict[str, Any]:
-    return {"amp": True, "task_reward_weight": 0.0, "amp_reward_weight": 1.0}
+    return {"amp": True, "task_reward_weight": 0.0, "amp_reward_weight": 1.0, "getup_starts": None}
 
 
 class GetupPhaseParams(BaseModel):
@@ -45,7 +45,8 @@ class GetupPhaseParams(BaseModel):
     imitator: dict[str, Any] = Field(
         default_factory=_getup_imitator_default,
         description="imitator params changed for this phase only (validated as the imitator's params): by default the AMP "
-        "reward on with task weight 0 and AMP weight 1 ([C] phase 1); e.g. amp_hidden for a CPU-sized discriminator. "
+        "reward on with task weight 0 and AMP weight 1 ([C] phase 1) and no get-up starts (they track a get-up clip; AMP "
+        "excludes them); e.g. amp_hidden for a CPU-sized discriminator. "
         "The discriminator starts fresh and is not carried into the point-goal phase",
     )
 
