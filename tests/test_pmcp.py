@@ -505,3 +505,46 @@ def test_pmcp_subsets_without_a_getup_clip_drop_getup_starts(tmp_path):
     final = Path(json.loads((tmp_path / "runs" / "r" / "stages.json").read_text())[0]["checkpoint"])
     prims = json.loads((final.parent / "pmcp_state.json").read_text())["primitives"]
     assert prims[1]["recovery"] is True and prims[1]["clip_ids"] == [0]  # P(F) on walk alone
+
+
+def test_pmcp_recovery_by_planner_distillation(tmp_path, amp):
+    """``recovery.method: planner_distill``: P(F) is fitted (DAgger) to the previous primitive driven by
+    the get-up planner, saved as a primitive, evaluated and frozen; the composer mixes K + 1."""
+    from mocap.testing import invoke
+    from mocap_phc.imitator import PHCParams, make_phc
+
+    text = RECOVERY_SPEC.replace("clips: [walk, kick]}", "clips: [walk, kick, getup_faceup]}").replace(
+        "recovery: {clips: [walk], env_steps: 128,",
+        "recovery: {clips: [walk, getup], env_steps: 40, method: planner_distill,"
+        " distill: {num_envs: 2, seconds: 0.5, epochs: 1, minibatch_size: 16, checkpoint_every: 1, fall: {settle_steps: 5}},",
+    )
+    assert "planner_distill" in text and "getup_faceup" in text
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(text)
+    result = invoke(["run", spec, "--out", tmp_path / "runs" / "d"])
+    assert result.exit_code == 0, result.output
+    assert "P(F) distillation it 2/2" in result.output  # 40 env steps / (2 envs x 15 steps) -> 2 iterations
+    final = Path(json.loads((tmp_path / "runs" / "d" / "stages.json").read_text())[0]["checkpoint"])
+    prims = json.loads((final.parent / "pmcp_state.json").read_text())["primitives"]
+    assert prims[1]["recovery"] is True and prims[1]["method"] == "planner_distill" and prims[1]["env_steps"] == 60
+    teacher = load_checkpoint(final.parent / "prim0" / "primitive.pt")["state_dict"]
+    student = load_checkpoint(final.parent / "prim1" / "primitive.pt")["state_dict"]
+    moved_ = [k for k in teacher if k.startswith("actor_body") and not torch.equal(teacher[k], student[k])]
+    assert moved_  # the student's actor was fitted
+    assert all(torch.equal(teacher[k], student[k]) for k in teacher if k.startswith(("critic_body", "value_head")))
+    imitator = make_phc(PHCParams(action="residual", recovery_goal={"form": "paper"}), skeleton=amp, checkpoint=final)
+    assert imitator.num_primitives == 2
+
+
+def test_planner_distillation_targets_and_schedule():
+    """The student's targets reproduce the teacher's PD targets through the student's own action map."""
+    from mocap_phc.pmcp_distill import student_targets, teacher_share
+
+    q = torch.tensor([[0.5, -0.2, 4.0]])
+    ref = torch.tensor([[0.1, 0.1, 0.0]])
+    assert torch.allclose(student_targets(q, ref, "residual", torch.zeros(3), torch.ones(3), None), q - ref)
+    assert torch.allclose(student_targets(q, ref, "residual", torch.zeros(3), torch.ones(3), 3.0), torch.tensor([[0.4, -0.3, 3.0]]))
+    off, scale = torch.tensor([0.1, 0.0, 1.0]), torch.tensor([2.0, 1.0, 0.5])
+    a = student_targets(q, None, "absolute", off, scale, None)
+    assert torch.allclose(off + scale * a, q)
+    assert [teacher_share(i, 10, 0.5) for i in (0, 1, 5, 9)] == [1.0, 0.8, 0.0, 0.0]

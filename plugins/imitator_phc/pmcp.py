@@ -361,6 +361,10 @@ class PMCPTrainer(Trainer):
         if k == 0 and p.primitive0 is not None:
             self._given_primitive(state, prim)
             return True
+        if prim.get("recovery") and not getup and p.recovery is not None and p.recovery.method == "planner_distill":
+            from mocap_phc.pmcp_distill import distill_recovery_primitive
+
+            return distill_recovery_primitive(self, state, prim)
         phase = f"prim{k}_getup" if getup else f"prim{k}"
         phase_dir = self.workdir / phase
         seed = self._phase_seed(k) + (104729 if getup else 0)

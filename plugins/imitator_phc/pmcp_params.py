@@ -7,10 +7,11 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from mocap.rl.ppo_params import PPOParams
 from mocap.fail_state_params import FailStateParams
+from mocap_phc.pmcp_distill import PlannerDistillParams
 
 ComposerForm = Literal["weighted_sum", "multiplicative"]
 
@@ -73,10 +74,23 @@ class RecoveryPhaseParams(BaseModel):
         description="first train P(F) in [C]'s AMP-only get-up phase (fallen starts only), then the point-goal phase "
         "above starts from its weights; None: no get-up phase ([P] mentions none)",
     )
+    method: Literal["rl", "planner_distill"] = Field(
+        "rl",
+        description="how P(F) learns: 'rl' = PPO with the point-goal reward ([P] Sec. 3.2, [C]); 'planner_distill' = DAgger "
+        "from the last imitation primitive driven by the get-up planner (mocap_phc.pmcp_distill; [I], neither the paper's "
+        "nor the code's), on fallen starts with the recovery protocol's still reference; env_steps is its budget",
+    )
+    distill: PlannerDistillParams = Field(default_factory=PlannerDistillParams, description="the 'planner_distill' method's settings")
     composer_fail_states: FailStateParams | None = Field(
         default_factory=_recovery_fail_default,
         description="episode starts while training the composer ([P] 'fail-state recovery training is interleaved during composer training'); None: RSI only",
     )
+
+    @model_validator(mode="after")
+    def _one_method(self) -> "RecoveryPhaseParams":
+        if self.method == "planner_distill" and self.getup is not None:
+            raise ValueError("recovery.getup is the RL method's first phase; with method 'planner_distill' leave it out")
+        return self
 
 
 def _composer_ppo_default() -> PPOParams:
