@@ -14,6 +14,8 @@ code's) turns that driver into a policy:
 * the **student** P(F) starts from the same weights and observes what P(F) observes at test time:
   the protocol's standing-still reference (``mocap_phc.recovery_eval.pick_still_frame``) through
   the imitator's recovery goal switch (PHC Eq. 3: far from it, only its root);
+* the planner and the still frame use the whole motion set, as ``mocap recover`` does (not the
+  recovery phase's ``clips``, which only choose the clips P(F) is evaluated on when it freezes);
 * rollouts start from fallen states (:func:`mocap.fail_states.generate_fall_states`, a share also
   ``far_range`` away), and the acting policy is the teacher for a share beta of the envs that falls
   from 1 to 0 over ``teacher_until`` of the iterations, then the student alone (DAgger, Ross et al.
@@ -217,9 +219,10 @@ def distill_recovery_primitive(trainer: Any, state: dict[str, Any], prim: dict[s
     ctx.console.print(f"pmcp: recovery primitive P(F) {k} distilled from primitive {k - 1} driven by the get-up planner, on {', '.join(names)}")
     sub = ctx.phase(f"prim{k}", workdir=phase_dir, seed=seed)
     try:
-        distiller = PlannerDistiller(
-            sub, p.recovery.distill, int(prim["budget_env_steps"]), trainer.component.params, trainer.skeleton, trainer._library(ids), teacher, seed
-        )
+        # the whole motion set, as `mocap recover --planner getup` runs: the planner's standing height and the
+        # still frame come from it (on a walk/run/get-up subset the median first frame is a lying one)
+        lib, budget = trainer._library(range(len(trainer.clip_names))), int(prim["budget_env_steps"])
+        distiller = PlannerDistiller(sub, p.recovery.distill, budget, trainer.component.params, trainer.skeleton, lib, teacher, seed)
         model = distiller.run(phase_dir)
     finally:
         sub.log.close()
