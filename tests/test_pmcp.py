@@ -516,7 +516,7 @@ def test_pmcp_recovery_by_planner_distillation(tmp_path, amp):
     text = RECOVERY_SPEC.replace("clips: [walk, kick]}", "clips: [walk, kick, getup_faceup]}").replace(
         "recovery: {clips: [walk], env_steps: 128,",
         "recovery: {clips: [walk, getup], env_steps: 40, method: planner_distill,"
-        " distill: {num_envs: 2, seconds: 0.5, epochs: 1, minibatch_size: 16, checkpoint_every: 1, fall: {settle_steps: 5}},",
+        " distill: {num_envs: 2, seconds: 0.5, epochs: 1, minibatch_size: 16, checkpoint_every: 1, action_noise: 0.05, fall: {settle_steps: 5}},",
     )
     assert "planner_distill" in text and "getup_faceup" in text
     spec = tmp_path / "spec.yaml"
@@ -548,3 +548,5 @@ def test_planner_distillation_targets_and_schedule():
     a = student_targets(q, None, "absolute", off, scale, None)
     assert torch.allclose(off + scale * a, q)
     assert [teacher_share(i, 10, 0.5) for i in (0, 1, 5, 9)] == [1.0, 0.8, 0.0, 0.0]
+    assert [round(teacher_share(i, 10, 0.5, 0.5), 6) for i in (0, 1, 5, 9)] == [1.0, 0.9, 0.5, 0.5]
+    assert [teacher_share(i, 10, 0.5, 1.0) for i in (0, 5, 9)] == [1.0, 1.0, 1.0]  # behaviour cloning

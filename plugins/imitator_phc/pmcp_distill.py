@@ -18,8 +18,10 @@ code's) turns that driver into a policy:
   recovery phase's ``clips``, which only choose the clips P(F) is evaluated on when it freezes);
 * rollouts start from fallen states (:func:`mocap.fail_states.generate_fall_states`, a share also
   ``far_range`` away), and the acting policy is the teacher for a share beta of the envs that falls
-  from 1 to 0 over ``teacher_until`` of the iterations, then the student alone (DAgger, Ross et al.
-  2011); every visited state is labelled with the teacher's PD targets, expressed as the student's
+  from 1 to ``teacher_floor`` over ``teacher_until`` of the iterations (DAgger, Ross et al. 2011;
+  ``teacher_floor`` 1 is behaviour cloning on the teacher's rollouts), with optional Gaussian noise
+  ``action_noise`` on the executed PD targets (DART, Laskey et al. 2017: the teacher's labels then
+  cover the perturbed states its own rollouts pass near); every visited state is labelled with the teacher's PD targets, expressed as the student's
   action (residual: target minus the student's reference pose), and the student's mean action is
   fitted by mean squared error on the last ``buffer_iterations`` rollouts.
 
@@ -58,7 +60,9 @@ class PlannerDistillParams(BaseModel):
     far_range: tuple[float, float] = Field((2.0, 5.0), description="distance of a far start, m (PHC's 2-5 m)")
     fall: FailStateParams = Field(default_factory=FailStateParams, description="how the fallen states are made (the protocol's defaults)")
     planner: GetUpPlannerParams = Field(default_factory=GetUpPlannerParams, description="the teacher's get-up planner")
-    teacher_until: float = Field(0.3, gt=0, le=1, description="share of the iterations over which beta (teacher-acting envs) falls from 1 to 0")
+    teacher_until: float = Field(0.3, gt=0, le=1, description="share of the iterations over which beta (teacher-acting envs) falls from 1 to teacher_floor")
+    teacher_floor: float = Field(0.0, ge=0, le=1, description="beta never falls below this (1: the teacher always acts, behaviour cloning)")
+    action_noise: float = Field(0.0, ge=0, description="std of Gaussian noise added to the executed PD targets, rad (DART; 0: none)")
     buffer_iterations: int = Field(4, ge=1, description="rollouts kept for fitting (the newest)")
     epochs: int = Field(4, ge=1, description="passes over the kept rollouts per iteration")
     minibatch_size: int = Field(4096, ge=1, description="samples per gradient step")
@@ -66,10 +70,10 @@ class PlannerDistillParams(BaseModel):
     checkpoint_every: int = Field(5, ge=1, description="iterations between resumable checkpoints")
 
 
-def teacher_share(iteration: int, iterations: int, teacher_until: float) -> float:
-    """beta: 1 at iteration 0, falling linearly to 0 at ``teacher_until`` x ``iterations``, then 0."""
+def teacher_share(iteration: int, iterations: int, teacher_until: float, floor: float = 0.0) -> float:
+    """beta: 1 at iteration 0, falling linearly to ``floor`` at ``teacher_until`` x ``iterations``, then ``floor``."""
     span = max(1.0, teacher_until * iterations)
-    return max(0.0, 1.0 - iteration / span)
+    return max(floor, 1.0 - (1.0 - floor) * iteration / span)
 
 
 def student_targets(teacher_q: Tensor, student_ref_dof: Tensor | None, mode: str, offset: Tensor, scale: Tensor, clip: float | None) -> Tensor:
@@ -135,7 +139,10 @@ class PlannerDistiller:
                 q_s = am(self.student.mean_action(flat_s), ref_s)
             obs_rows.append(flat_s)
             targets.append(student_targets(q_t, ref_s, am.mode, am.offset, am.scale, am.clip).float())
-            state = sim.step(torch.where(teach[:, None], q_t.to(q_s), q_s))
+            q = torch.where(teach[:, None], q_t.to(q_s), q_s)
+            if p.action_noise > 0:
+                q = q + p.action_noise * torch.randn(q.shape, generator=gen, dtype=q.dtype)
+            state = sim.step(q)
             body = torch.linalg.vector_norm(state.body_pos.double().cpu() - still.body_pos.double().cpu(), dim=-1).mean(-1)
             errs.append(body)
         err = torch.stack(errs)
@@ -178,7 +185,7 @@ class PlannerDistiller:
                 start = int(saved["iteration"])
                 ctx.console.print(f"pmcp: P(F) distillation resumes at iteration {start} of {iterations} (the rollout buffer starts empty)")
             for it in range(start, iterations):
-                beta = teacher_share(it, iterations, p.teacher_until)
+                beta = teacher_share(it, iterations, p.teacher_until, p.teacher_floor)
                 obs, target, stats = self._rollout(sim, gen, beta)
                 buffer = (buffer + [(obs, target)])[-p.buffer_iterations :]
                 loss = self._fit(torch.cat([b[0] for b in buffer]), torch.cat([b[1] for b in buffer]), gen)
