@@ -8,7 +8,8 @@ Reads the run's ``metrics.jsonl`` (every PMCP phase logs under its own stage lab
 
 Scalars: the mean reward per step, the AMP reward and the discriminator's accuracy (when the phase
 has AMP on), the training episode length, and the share of envs whose root is farther than the
-recovery goal's close distance (``recovery/far``).
+recovery goal's close distance (``recovery/far``); for a P(F) distilled with ``method: planner_distill``,
+its fitting loss and the share of its rollouts that recovered.
 """
 
 from __future__ import annotations
@@ -23,6 +24,8 @@ KEYS = {
     "eval/amp/accuracy": "discriminator accuracy",
     "episode/length": "episode length (steps)",
     "env/recovery/far": "share of envs far (> close distance)",
+    "loss": "distillation loss (P(F) planner_distill)",
+    "distill/recovered": "rollouts recovered (distillation, mostly the teacher)",
 }
 
 

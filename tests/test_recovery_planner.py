@@ -121,6 +121,14 @@ def test_the_approach_warp_starts_slow_and_its_rate_is_its_derivative(bundled, r
     assert float(planner._warp(torch.zeros(1, dtype=torch.float64))[0]) == 0.0
 
 
+@pytest.mark.parametrize("ramp", [5e-324, 1e-12])
+def test_a_subnormal_approach_ramp_is_no_ramp(bundled, ramp):  # noqa: F811
+    """Found by the property above: a 5e-324 s ramp gave rates of 1.25 and 0.5 at e = 1 s."""
+    planner = GetUpPlanner(bundled, GetUpPlannerParams(approach_start_rate=0.25, approach_ramp_s=ramp), 1, DT)
+    tau, rate = planner._warp(torch.tensor([1.0], dtype=torch.float64))
+    assert float(rate[0]) == 1.0 and float(tau[0]) == 1.0
+
+
 def test_bad_planner_settings_are_clear_errors(bundled):  # noqa: F811
     with pytest.raises(ValueError, match="no clip matches"):
         GetUpPlanner(bundled, GetUpPlannerParams(clips=["nothing*"]), 1, DT)

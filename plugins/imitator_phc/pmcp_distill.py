@@ -36,38 +36,17 @@ from pathlib import Path
 from typing import Any
 
 import torch
-from pydantic import BaseModel, ConfigDict, Field
 from torch import Tensor
 
 from mocap.checkpoint import load_checkpoint, save_checkpoint
-from mocap.fail_states import FailStateParams, generate_fall_states, moved
+from mocap.fail_states import generate_fall_states, moved
 from mocap.rl.networks import ActorCritic
 from mocap_phc.observation import PHCObservation
 from mocap_phc.recovery_eval import pick_still_frame, still_reference
-from mocap_phc.recovery_planner import GetUpPlanner, GetUpPlannerParams
+from mocap_phc.pmcp_params import PlannerDistillParams
+from mocap_phc.recovery_planner import GetUpPlanner
 
 STATE_NAME = "distill.pt"
-
-
-class PlannerDistillParams(BaseModel):
-    """DAgger of P(F) from the planner-driven primitive (module docstring); the env-step budget is
-    the recovery phase's ``env_steps``."""
-
-    model_config = ConfigDict(extra="forbid")
-    num_envs: int = Field(64, ge=1, description="fallen starts simulated in parallel per rollout")
-    seconds: float = Field(10.0, gt=0, description="length of a rollout, s (the recovery protocol's 10 s)")
-    far_prob: float = Field(0.5, ge=0, le=1, description="share of the starts also moved away from the reference (the protocol's 0.5)")
-    far_range: tuple[float, float] = Field((2.0, 5.0), description="distance of a far start, m (PHC's 2-5 m)")
-    fall: FailStateParams = Field(default_factory=FailStateParams, description="how the fallen states are made (the protocol's defaults)")
-    planner: GetUpPlannerParams = Field(default_factory=GetUpPlannerParams, description="the teacher's get-up planner")
-    teacher_until: float = Field(0.3, gt=0, le=1, description="share of the iterations over which beta (teacher-acting envs) falls from 1 to teacher_floor")
-    teacher_floor: float = Field(0.0, ge=0, le=1, description="beta never falls below this (1: the teacher always acts, behaviour cloning)")
-    action_noise: float = Field(0.0, ge=0, description="std of Gaussian noise added to the executed PD targets, rad (DART; 0: none)")
-    buffer_iterations: int = Field(4, ge=1, description="rollouts kept for fitting (the newest)")
-    epochs: int = Field(4, ge=1, description="passes over the kept rollouts per iteration")
-    minibatch_size: int = Field(4096, ge=1, description="samples per gradient step")
-    lr: float = Field(1e-4, gt=0, description="Adam learning rate of the student's actor")
-    checkpoint_every: int = Field(5, ge=1, description="iterations between resumable checkpoints")
 
 
 def teacher_share(iteration: int, iterations: int, teacher_until: float, floor: float = 0.0) -> float:
@@ -175,7 +154,8 @@ class PlannerDistiller:
             per_iteration = p.num_envs * round(p.seconds / float(sim.dt))
             iterations = max(1, math.ceil(self.budget / per_iteration))
             gen = torch.Generator().manual_seed(self.seed)
-            start, buffer = 0, []
+            start = 0
+            buffer: list[tuple[Tensor, Tensor]] = []
             path = phase_dir / STATE_NAME
             if path.is_file():
                 saved = load_checkpoint(path)
@@ -190,7 +170,7 @@ class PlannerDistiller:
                 buffer = (buffer + [(obs, target)])[-p.buffer_iterations :]
                 loss = self._fit(torch.cat([b[0] for b in buffer]), torch.cat([b[1] for b in buffer]), gen)
                 steps = (it + 1) * per_iteration
-                ctx.log.log(steps, loss=loss, **{f"distill/{k}": v for k, v in stats.items()})
+                ctx.log.log(it + 1, env_steps=steps, loss=loss, **{f"distill/{k}": v for k, v in stats.items()})  # as PPO logs
                 shown = " ".join(f"{k} {v:.2f}" for k, v in stats.items())
                 ctx.console.print(f"pmcp: P(F) distillation it {it + 1}/{iterations} | {steps:,} steps | loss {loss:.4f} | {shown}")
                 last = it + 1 == iterations

@@ -11,7 +11,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from mocap.rl.ppo_params import PPOParams
 from mocap.fail_state_params import FailStateParams
-from mocap_phc.pmcp_distill import PlannerDistillParams
+from mocap_phc.planner_params import GetUpPlannerParams
 
 ComposerForm = Literal["weighted_sum", "multiplicative"]
 
@@ -50,6 +50,27 @@ class GetupPhaseParams(BaseModel):
         "excludes them); e.g. amp_hidden for a CPU-sized discriminator. "
         "The discriminator starts fresh and is not carried into the point-goal phase",
     )
+
+
+class PlannerDistillParams(BaseModel):
+    """DAgger of P(F) from the planner-driven primitive (module docstring); the env-step budget is
+    the recovery phase's ``env_steps``."""
+
+    model_config = ConfigDict(extra="forbid")
+    num_envs: int = Field(64, ge=1, description="fallen starts simulated in parallel per rollout")
+    seconds: float = Field(10.0, gt=0, description="length of a rollout, s (the recovery protocol's 10 s)")
+    far_prob: float = Field(0.5, ge=0, le=1, description="share of the starts also moved away from the reference (the protocol's 0.5)")
+    far_range: tuple[float, float] = Field((2.0, 5.0), description="distance of a far start, m (PHC's 2-5 m)")
+    fall: FailStateParams = Field(default_factory=FailStateParams, description="how the fallen states are made (the protocol's defaults)")
+    planner: GetUpPlannerParams = Field(default_factory=GetUpPlannerParams, description="the teacher's get-up planner")
+    teacher_until: float = Field(0.3, gt=0, le=1, description="share of the iterations over which beta (teacher-acting envs) falls from 1 to teacher_floor")
+    teacher_floor: float = Field(0.0, ge=0, le=1, description="beta never falls below this (1: the teacher always acts, behaviour cloning)")
+    action_noise: float = Field(0.0, ge=0, description="std of Gaussian noise added to the executed PD targets, rad (DART; 0: none)")
+    buffer_iterations: int = Field(4, ge=1, description="rollouts kept for fitting (the newest)")
+    epochs: int = Field(4, ge=1, description="passes over the kept rollouts per iteration")
+    minibatch_size: int = Field(4096, ge=1, description="samples per gradient step")
+    lr: float = Field(1e-4, gt=0, description="Adam learning rate of the student's actor")
+    checkpoint_every: int = Field(5, ge=1, description="iterations between resumable checkpoints")
 
 
 class RecoveryPhaseParams(BaseModel):

@@ -36,37 +36,16 @@ from dataclasses import replace
 from typing import Any
 
 import torch
-from pydantic import BaseModel, ConfigDict, Field
 from torch import Tensor
 
 from mocap.getup_starts import GetUpClips
+from mocap_phc.planner_params import GetUpPlannerParams
 from mocap.motion.transform import frames_at_rate, yaw_frames
 from mocap.rotations import heading_angle
 from mocap.state import HUMANOID_FIELDS, MotionFrames
 
 TRACK, GETUP, APPROACH = 0, 1, 2
-
-
-class GetUpPlannerParams(BaseModel):
-    """The get-up planner (module docstring)."""
-
-    model_config = ConfigDict(extra="forbid")
-    clips: list[str] = Field(default_factory=lambda: ["getup*"], min_length=1, description="get-up clips, as fnmatch patterns of clip names")
-    fallen_ratio: float = Field(0.5, gt=0, lt=1, description="fallen: root height below this x the standing root height")
-    up_ratio: float = Field(
-        0.8, gt=0, le=1, description="up: root height at least this x the standing root height; a get-up ends when its clip has ended and the humanoid is up"
-    )
-    fallen_steps: int = Field(
-        10, ge=1, description="control steps a trial must stay fallen before a new get-up starts (a trial that starts down starts at once)"
-    )
-    approach_clip: str | None = Field("walk", description="looping clip walked toward the reference after a get-up (None: no approach)")
-    approach_distance: float = Field(0.4, gt=0, description="the approach ends when the root is this close to the reference root, m")
-    approach_start_rate: float = Field(0.3, gt=0, le=1, description="the approach clip starts played at this rate (1: at its own speed)")
-    approach_ramp_s: float = Field(1.0, ge=0, description="seconds over which the approach's rate rises to 1 (0: no ramp)")
-    max_turn_deg: float = Field(
-        30.0, gt=0, le=180, description="at each re-aiming the clip faces the humanoid's heading turned toward the goal by at most this, deg"
-    )
-    replan_steps: int = Field(15, ge=1, description="control steps between two re-aimings of the approach clip")
+MIN_RAMP_S = 1e-9  # approach ramps shorter than this are no ramp (:meth:`GetUpPlanner._warp`)
 
 
 def standing_height(library: Any) -> float:
@@ -137,9 +116,10 @@ class GetUpPlanner:
 
     def _warp(self, e: Tensor) -> tuple[Tensor, Tensor]:
         """(clip time elapsed, rate) after ``e`` s of an approach: the rate rises linearly from
-        ``approach_start_rate`` to 1 over ``approach_ramp_s``, then stays 1."""
+        ``approach_start_rate`` to 1 over ``approach_ramp_s``, then stays 1. A ramp shorter than
+        ``MIN_RAMP_S`` is none (a subnormal ramp made ``within / ramp`` inexact: rates above 1)."""
         r0, ramp = self.p.approach_start_rate, self.p.approach_ramp_s
-        if ramp <= 0:
+        if ramp < MIN_RAMP_S:
             return e, torch.ones_like(e)
         within = e.clamp(max=ramp)
         tau = r0 * within + (1.0 - r0) * within**2 / (2.0 * ramp) + (e - ramp).clamp(min=0.0)
