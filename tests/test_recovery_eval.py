@@ -6,7 +6,7 @@ import math
 
 import pytest
 import torch
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 from test_distill import walk  # noqa: F401  (fixture)
 
@@ -186,3 +186,20 @@ def test_still_reference_with_a_named_clip_holds_its_last_frame(amp, bundled):
     params = RecoveryEvalParams(trials=2, seconds=0.1, reference="still", clip="walk", far_prob=0.0, fall=FailStateParams(settle_steps=5))
     res = evaluate_recovery(HoldPose(amp.num_dofs), bundled, lambda n: MujocoSimulator(skeleton=amp, num_envs=n, seed=0), amp, params)
     assert res["clip"] == "walk" and res["reference_time_s"] == pytest.approx(float(bundled.durations[bundled.clip_names.index("walk")]))
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), n=st.integers(1, 32), prob=st.floats(0.0, 1.0), lo=st.floats(0.0, 4.0), width=st.floats(0.0, 3.0))
+def test_far_shift_puts_near_starts_under_the_reference_and_far_ones_in_range(seed, n, prob, lo, width):
+    from mocap_phc.recovery_eval import far_shift
+
+    gen = torch.Generator().manual_seed(seed)
+    ref = torch.randn(n, 2, generator=gen, dtype=torch.float64)
+    fallen = torch.randn(n, 2, generator=gen, dtype=torch.float64)
+    shift, far = far_shift(gen, n, ref, fallen, prob, (lo, lo + width))
+    assert shift.shape == (n, 3) and far.shape == (n,) and bool((shift[:, 2] == 0).all())
+    dist = torch.linalg.vector_norm(fallen + shift[:, :2] - ref, dim=-1)
+    assert torch.allclose(dist[~far], torch.zeros_like(dist[~far]), atol=1e-12)
+    assert bool((dist[far] >= lo - 1e-9).all()) and bool((dist[far] <= lo + width + 1e-9).all())
+    if prob == 0.0:
+        assert not bool(far.any())

@@ -21,9 +21,10 @@ code's) turns that driver into a policy:
   from 1 to ``teacher_floor`` over ``teacher_until`` of the iterations (DAgger, Ross et al. 2011;
   ``teacher_floor`` 1 is behaviour cloning on the teacher's rollouts), with optional Gaussian noise
   ``action_noise`` on the executed PD targets (DART, Laskey et al. 2017: the teacher's labels then
-  cover the perturbed states its own rollouts pass near); every visited state is labelled with the teacher's PD targets, expressed as the student's
-  action (residual: target minus the student's reference pose), and the student's mean action is
-  fitted by mean squared error on the last ``buffer_iterations`` rollouts.
+  cover the perturbed states its own rollouts pass near); every visited state is labelled with the
+  teacher's PD targets, expressed as the student's action (residual: target minus the student's
+  reference pose), and the student's mean action is fitted by mean squared error on the last
+  ``buffer_iterations`` rollouts.
 
 The fallen states use the generator of the phase seed, not the seeds of ``mocap recover``; the
 reference is the same still frame the protocol uses, so P(F) trains on the protocol's task.
@@ -42,7 +43,7 @@ from mocap.checkpoint import load_checkpoint, save_checkpoint
 from mocap.fail_states import generate_fall_states, moved
 from mocap.rl.networks import ActorCritic
 from mocap_phc.observation import PHCObservation
-from mocap_phc.recovery_eval import pick_still_frame, still_reference
+from mocap_phc.recovery_eval import far_shift, pick_still_frame, still_reference
 from mocap_phc.pmcp_params import PlannerDistillParams
 from mocap_phc.recovery_planner import GetUpPlanner
 
@@ -67,19 +68,6 @@ def student_targets(teacher_q: Tensor, student_ref_dof: Tensor | None, mode: str
     return a if clip is None else a.clamp(-clip, clip)
 
 
-def far_shift(gen: torch.Generator, n: int, ref_xy: Tensor, fallen_xy: Tensor, prob: float, lo: float, hi: float) -> Tensor:
-    """(n, 3) shift that puts each fallen root under the reference root, a share ``prob`` also a
-    uniform ``lo``-``hi`` m away in a uniform direction (as the recovery protocol does)."""
-    shift = torch.zeros(n, 3, dtype=torch.float64)
-    shift[:, :2] = ref_xy.double() - fallen_xy.double()
-    far = torch.rand(n, generator=gen, dtype=torch.float64) < prob
-    dist = lo + (hi - lo) * torch.rand(n, generator=gen, dtype=torch.float64)
-    ang = 2 * math.pi * torch.rand(n, generator=gen, dtype=torch.float64)
-    shift[:, 0] += torch.where(far, dist * torch.cos(ang), torch.zeros_like(dist))
-    shift[:, 1] += torch.where(far, dist * torch.sin(ang), torch.zeros_like(dist))
-    return shift
-
-
 class PlannerDistiller:
     """One P(F) distillation run (module docstring): ``run()`` returns the student, or None when stopped."""
 
@@ -100,7 +88,7 @@ class PlannerDistiller:
         p, n = self.p, self.p.num_envs
         fallen = generate_fall_states(sim, self.sk, n, p.fall, gen)
         still = still_reference(self.lib, self.clip, self.t_still, n, self.frames)
-        shift = far_shift(gen, n, still.root_pos[:, :2].cpu(), fallen.root_pos[:, :2].cpu(), p.far_prob, *p.far_range)
+        shift, _ = far_shift(gen, n, still.root_pos[:, :2].cpu(), fallen.root_pos[:, :2].cpu(), p.far_prob, p.far_range)
         sim.reset(torch.arange(n), moved(fallen, shift.to(fallen.root_pos)))
         state = sim.state
         dt = float(sim.dt)
@@ -244,4 +232,4 @@ def distill_recovery_primitive(trainer: Any, state: dict[str, Any], prim: dict[s
     return True
 
 
-__all__ = ["PlannerDistillParams", "PlannerDistiller", "distill_recovery_primitive", "far_shift", "student_targets", "teacher_share"]
+__all__ = ["PlannerDistillParams", "PlannerDistiller", "distill_recovery_primitive", "student_targets", "teacher_share"]

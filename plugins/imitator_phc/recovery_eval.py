@@ -109,6 +109,22 @@ def still_reference(library: Any, clip: int, time: float, n: int, steps: int = 1
     return replace(out, ahead=(out,) * (steps - 1)) if steps > 1 else out
 
 
+def far_shift(
+    gen: torch.Generator, n: int, ref_xy: torch.Tensor, fallen_xy: torch.Tensor, prob: float, far_range: tuple[float, float]
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """((n, 3) shift, (n,) far mask): the shift puts each fallen root under the reference root, and a
+    share ``prob`` of them (the mask) a further uniform ``far_range`` m away in a uniform direction."""
+    shift = torch.zeros(n, 3, dtype=torch.float64)
+    shift[:, :2] = ref_xy.double() - fallen_xy.double()
+    far = torch.rand(n, generator=gen, dtype=torch.float64) < prob
+    lo, hi = far_range
+    dist = lo + (hi - lo) * torch.rand(n, generator=gen, dtype=torch.float64)
+    ang = 2 * math.pi * torch.rand(n, generator=gen, dtype=torch.float64)
+    shift[:, 0] += torch.where(far, dist * torch.cos(ang), torch.zeros_like(dist))
+    shift[:, 1] += torch.where(far, dist * torch.sin(ang), torch.zeros_like(dist))
+    return shift, far
+
+
 def recovery_summary(err: torch.Tensor, root_dist: torch.Tensor, dt: float, threshold: float) -> dict[str, Any]:
     """Metrics from per-step errors ``err`` (T, N) (mean body distance, m) and root distances (T, N).
 
@@ -170,14 +186,7 @@ def evaluate_recovery(
         frames_seen = policy.reference_steps
         still = still_reference(library, clip, t_still, n, frames_seen) if p.reference == "still" else None
         ref = still if still is not None else library.frames(clip_ids, zeros)
-        shift = torch.zeros(n, 3, dtype=torch.float64)
-        shift[:, :2] = ref.root_pos[:, :2].double().cpu() - fallen.root_pos[:, :2].double().cpu()
-        far = torch.rand(n, generator=gen, dtype=torch.float64) < p.far_prob
-        lo, hi = p.far_range
-        dist = lo + (hi - lo) * torch.rand(n, generator=gen, dtype=torch.float64)
-        ang = 2 * math.pi * torch.rand(n, generator=gen, dtype=torch.float64)
-        shift[:, 0] += torch.where(far, dist * torch.cos(ang), torch.zeros_like(dist))
-        shift[:, 1] += torch.where(far, dist * torch.sin(ang), torch.zeros_like(dist))
+        shift, far = far_shift(gen, n, ref.root_pos[:, :2].cpu(), fallen.root_pos[:, :2].cpu(), p.far_prob, p.far_range)
         start = moved(fallen, shift.to(fallen.root_pos))
         sim.reset(torch.arange(n), start)
         state = sim.state
@@ -248,4 +257,14 @@ def evaluate_recovery(
     return out
 
 
-__all__ = ["PROTOCOL", "RecoveryEvalParams", "best_trial", "evaluate_recovery", "pick_clip", "pick_still_frame", "recovery_summary", "still_reference"]
+__all__ = [
+    "PROTOCOL",
+    "RecoveryEvalParams",
+    "best_trial",
+    "evaluate_recovery",
+    "far_shift",
+    "pick_clip",
+    "pick_still_frame",
+    "recovery_summary",
+    "still_reference",
+]
