@@ -109,3 +109,18 @@ def test_pmcp_planner_distillation_resumes_after_a_stop(tmp_path):
     assert "P(F) distillation resumes at iteration 1 of 3" in outputs[1] and "distillation it 1/3" not in outputs[1]
     state = json.loads((workdir / "pmcp_state.json").read_text())
     assert state["phase"] == "done" and state["primitives"][1]["env_steps"] == 90
+
+
+def test_planner_distillation_without_getup_clips_is_one_error_line(tmp_path):
+    """Checked when the stage starts (not after primitive 0): one ``error:`` line, no traceback."""
+    from mocap.testing import invoke
+
+    text = RECOVERY_SPEC.replace("recovery: {clips: [walk], env_steps: 128,", "recovery: {clips: [walk], env_steps: 128, method: planner_distill,")
+    assert "planner_distill" in text and "getup" not in text
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(text)
+    result = invoke(["run", spec, "--out", tmp_path / "runs" / "e"])
+    assert result.exit_code == 2 and "Traceback" not in result.output
+    lines = [line for line in result.stderr.splitlines() if line.startswith("error:")]
+    assert len(lines) == 1 and "planner_distill" in lines[0] and "no clip matches ['getup*']" in lines[0], result.stderr
+    assert "primitive 0" not in result.output  # before any training

@@ -141,6 +141,14 @@ class PMCPTrainer(Trainer):
             )
         if self.params.recovery is not None and self.params.recovery.getup is not None:
             self._getup_params()  # checked before primitive 0's evaluation and P(F), not hours into the run
+        if self.params.recovery is not None and self.params.recovery.method == "planner_distill":
+            from mocap.errors import UserError
+            from mocap_phc.recovery_planner import GetUpPlanner
+
+            try:  # the teacher's planner needs get-up clips and a looping approach clip in the motion set
+                GetUpPlanner(self._library(range(len(self.clips))), self.params.recovery.distill.planner, 1, 1.0 / 30.0)
+            except ValueError as err:
+                raise UserError(f"pmcp recovery.method planner_distill: {err}") from None
 
     def _library(self, ids: Sequence[int]) -> Any:
         from mocap.motion.library import MotionLibrary
