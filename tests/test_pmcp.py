@@ -266,14 +266,34 @@ def test_pmcp_stage_end_to_end(straight, amp):
     assert set(json.loads(out.read_text())["clips"]) == {"walk", "kick"}
 
 
-def test_pmcp_resume_is_exact_in_every_phase(straight, tmp_path):
-    """Ctrl-C (a stop after the 2nd should_stop call of each run) in every phase, rerun until done:
-    the same primitives, composer and evaluations as the uninterrupted run."""
+def imitator_context(resolved, plugins, workdir, run_dir, stop, out):
+    """(the imitator stage's context with the given ``stop`` and console file ``out``, its metrics log)."""
     from rich.console import Console
 
     from mocap.pipeline import StageContext, derive_seed
-    from mocap.plugins import get_plugins
     from mocap.runlog import MetricsLogger
+
+    log = MetricsLogger(run_dir / "metrics.jsonl", "imitator")
+    ctx = StageContext(
+        stage="imitator",
+        resolved=resolved,
+        plugins=plugins,
+        workdir=workdir,
+        run_dir=run_dir,
+        upstream={},
+        log=log,
+        seed=derive_seed(resolved.spec.seed, "imitator"),
+        device=torch.device("cpu"),
+        console=Console(file=out, width=200),
+        _stop=stop,
+    )
+    return ctx, log
+
+
+def test_pmcp_resume_is_exact_in_every_phase(straight, tmp_path):
+    """Ctrl-C (a stop after the 2nd should_stop call of each run) in every phase, rerun until done:
+    the same primitives, composer and evaluations as the uninterrupted run."""
+    from mocap.plugins import get_plugins
     from mocap.spec import load_spec_text
 
     _, final = straight
@@ -288,20 +308,7 @@ def test_pmcp_resume_is_exact_in_every_phase(straight, tmp_path):
             calls["n"] += 1
             return calls["n"] >= 2
 
-        log = MetricsLogger(tmp_path / "metrics.jsonl", "imitator")
-        ctx = StageContext(
-            stage="imitator",
-            resolved=resolved,
-            plugins=plugins,
-            workdir=workdir,
-            run_dir=tmp_path,
-            upstream={},
-            log=log,
-            seed=derive_seed(resolved.spec.seed, "imitator"),
-            device=torch.device("cpu"),
-            console=Console(file=io.StringIO()),
-            _stop=stop,
-        )
+        ctx, log = imitator_context(resolved, plugins, workdir, tmp_path, stop, io.StringIO())
         result = ctx.build("imitator.trainer").run(ctx)
         log.close()
         state = json.loads((workdir / "pmcp_state.json").read_text())

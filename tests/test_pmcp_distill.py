@@ -8,9 +8,17 @@ import json
 from pathlib import Path
 
 import torch
-from test_pmcp import RECOVERY_SPEC
+from test_pmcp import RECOVERY_SPEC, imitator_context
 
 from mocap.checkpoint import load_checkpoint
+
+
+def distill_spec(env_steps: int, distill: str) -> str:
+    """The tiny recovery spec with a get-up clip and P(F) by ``planner_distill`` (``distill``: its flow-style settings)."""
+    return RECOVERY_SPEC.replace("clips: [walk, kick]}", "clips: [walk, kick, getup_faceup]}").replace(
+        "recovery: {clips: [walk], env_steps: 128,",
+        f"recovery: {{clips: [walk, getup], env_steps: {env_steps}, method: planner_distill, distill: {distill},",
+    )
 
 
 def test_pmcp_recovery_by_planner_distillation(tmp_path, amp):
@@ -19,11 +27,7 @@ def test_pmcp_recovery_by_planner_distillation(tmp_path, amp):
     from mocap.testing import invoke
     from mocap_phc.imitator import PHCParams, make_phc
 
-    text = RECOVERY_SPEC.replace("clips: [walk, kick]}", "clips: [walk, kick, getup_faceup]}").replace(
-        "recovery: {clips: [walk], env_steps: 128,",
-        "recovery: {clips: [walk, getup], env_steps: 40, method: planner_distill,"
-        " distill: {num_envs: 2, seconds: 0.5, epochs: 1, minibatch_size: 16, checkpoint_every: 1, action_noise: 0.05, fall: {settle_steps: 5}},",
-    )
+    text = distill_spec(40, "{num_envs: 2, seconds: 0.5, epochs: 1, minibatch_size: 16, checkpoint_every: 1, action_noise: 0.05, fall: {settle_steps: 5}}")
     assert "planner_distill" in text and "getup_faceup" in text
     spec = tmp_path / "spec.yaml"
     spec.write_text(text)
@@ -61,18 +65,10 @@ def test_planner_distillation_targets_and_schedule():
 def test_pmcp_planner_distillation_resumes_after_a_stop(tmp_path):
     """A stop inside the distillation leaves ``distill.pt``; the rerun continues at its iteration
     (the rollout buffer starts empty, as its message says) and the stage finishes."""
-    from rich.console import Console
-
-    from mocap.pipeline import StageContext, derive_seed
     from mocap.plugins import get_plugins
-    from mocap.runlog import MetricsLogger
     from mocap.spec import load_spec_text
 
-    text = RECOVERY_SPEC.replace("clips: [walk, kick]}", "clips: [walk, kick, getup_faceup]}").replace(
-        "recovery: {clips: [walk], env_steps: 128,",
-        "recovery: {clips: [walk, getup], env_steps: 90, method: planner_distill,"
-        " distill: {num_envs: 2, seconds: 0.5, epochs: 1, minibatch_size: 16, checkpoint_every: 5, fall: {settle_steps: 5}},",
-    )
+    text = distill_spec(90, "{num_envs: 2, seconds: 0.5, epochs: 1, minibatch_size: 16, checkpoint_every: 5, fall: {settle_steps: 5}}")
     plugins = get_plugins()
     resolved = load_spec_text(text, plugins)
     workdir, outputs = tmp_path / "art", []
@@ -86,20 +82,7 @@ def test_pmcp_planner_distillation_resumes_after_a_stop(tmp_path):
             return interrupt and calls["n"] >= 2
 
         out = io.StringIO()
-        log = MetricsLogger(tmp_path / "metrics.jsonl", "imitator")
-        ctx = StageContext(
-            stage="imitator",
-            resolved=resolved,
-            plugins=plugins,
-            workdir=workdir,
-            run_dir=tmp_path,
-            upstream={},
-            log=log,
-            seed=derive_seed(resolved.spec.seed, "imitator"),
-            device=torch.device("cpu"),
-            console=Console(file=out, width=200),
-            _stop=stop,
-        )
+        ctx, log = imitator_context(resolved, plugins, workdir, tmp_path, stop, out)
         ctx.build("imitator.trainer").run(ctx)
         log.close()
         outputs.append(out.getvalue())

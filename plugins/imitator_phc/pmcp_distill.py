@@ -95,7 +95,7 @@ class PlannerDistiller:
         planner = GetUpPlanner(self.lib, p.planner, n, dt, self.frames)
         teach = torch.rand(n, generator=gen) < beta
         obs_rows, targets, errs = [], [], []
-        am = self.amap
+        am, still_body = self.amap, still.body_pos.double().cpu()
         for k in range(1, round(p.seconds / dt) + 1):
             given = planner.reference(k, state, still)
             o_t, o_s = self.teacher_obs(state, given), self.student_obs(state, still)
@@ -110,8 +110,7 @@ class PlannerDistiller:
             if p.action_noise > 0:
                 q = q + p.action_noise * torch.randn(q.shape, generator=gen, dtype=q.dtype)
             state = sim.step(q)
-            body = torch.linalg.vector_norm(state.body_pos.double().cpu() - still.body_pos.double().cpu(), dim=-1).mean(-1)
-            errs.append(body)
+            errs.append(torch.linalg.vector_norm(state.body_pos.double().cpu() - still_body, dim=-1).mean(-1))
         err = torch.stack(errs)
         stats = {"recovered": float((err <= 0.5).any(0).double().mean()), "beta": beta}
         student_rows = ~teach
