@@ -72,7 +72,7 @@ def run_one(target: str, planner: str, seed: int, trials: int, seconds: float) -
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--target", action="append", required=True, help="NAME=PATH, what `mocap recover` accepts (repeatable)")
-    ap.add_argument("--planner", action="append", choices=["none", "getup"], help="repeatable (default: none and getup)")
+    ap.add_argument("--planner", action="append", choices=["none", "getup", "getup-pose"], help="repeatable (default: none and getup)")
     ap.add_argument("--seed", dest="seeds", action="append", type=int, help="repeatable (default: 0)")
     ap.add_argument("--jobs", type=int, default=1, help="`mocap recover` processes at a time")
     ap.add_argument("--trials", type=int, default=64)

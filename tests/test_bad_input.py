@@ -110,10 +110,11 @@ def test_recover_with_a_bad_reference_is_one_line(amp_policy, args):
     assert ("walk" in line) == (args[0] == "--clip")  # an unknown clip lists the clips there are
 
 
-def test_recover_with_the_getup_planner_on_a_motion_set_without_getups_is_one_line(amp_policy):
+@pytest.mark.parametrize("planner", ["getup", "getup-pose"])
+def test_recover_with_the_getup_planner_on_a_motion_set_without_getups_is_one_line(amp_policy, planner):
     """The planner needs get-up clips (and a looping walk); a policy trained on walk alone has none."""
-    result = invoke(["recover", amp_policy, "--trials", "1", "--seconds", "0.1", "--planner", "getup"])
-    assert_one_line_error(result, str(amp_policy), "--planner getup", "no clip matches ['getup*']")
+    result = invoke(["recover", amp_policy, "--trials", "1", "--seconds", "0.1", "--planner", planner])
+    assert_one_line_error(result, str(amp_policy), f"--planner {planner}:", "no clip matches ['getup*']")
 
 
 PULSE_SMALL = {"encoder_hidden": [8], "prior_hidden": [8], "decoder_hidden": [8]}

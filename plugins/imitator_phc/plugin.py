@@ -64,7 +64,8 @@ def register_commands(app: Any) -> None:
             typer.Option(
                 "--planner",
                 help="'none': the imitator gets the protocol's reference (PHC Table 4); 'getup': when down it is given a get-up clip "
-                "aligned to how it lies, then walks back (mocap_phc.recovery_planner; not PHC's P(F))",
+                "aligned to how it lies, then walks back (mocap_phc.recovery_planner; not PHC's P(F)); 'getup-pose': the same, "
+                "with the get-up clip's time following the humanoid's pose (getup_clock 'pose')",
             ),
         ] = "none",
     ) -> None:
@@ -91,14 +92,15 @@ def register_commands(app: Any) -> None:
             raise UserError(f"--clip: no clip {clip!r} in the motion set (clips: {', '.join(loaded.library.clip_names)})")
         if video_trial != "best" and not (video_trial.isdigit() and int(video_trial) < trials):
             raise UserError(f"--video-trial must be 'best' or a trial index below --trials ({trials}), not {video_trial!r}")
-        if planner not in ("none", "getup"):
-            raise UserError(f"--planner must be 'none' or 'getup', not {planner!r}")
-        plan = GetUpPlannerParams() if planner == "getup" else None
+        plans = {"none": None, "getup": GetUpPlannerParams(), "getup-pose": GetUpPlannerParams(getup_clock="pose")}
+        if planner not in plans:
+            raise UserError(f"--planner must be one of {', '.join(plans)}, not {planner!r}")
+        plan = plans[planner]
         if plan is not None:
             try:  # the planner needs get-up clips and a looping approach clip in the target's motion set
                 GetUpPlanner(loaded.library, plan, 1, 1.0 / 30.0)
             except ValueError as err:
-                raise UserError(f"{target}: --planner getup: {err}; it runs on the motion set the policy was trained on") from None
+                raise UserError(f"{target}: --planner {planner}: {err}; it runs on the motion set the policy was trained on") from None
         params = RecoveryEvalParams(trials=trials, seconds=seconds, reference=reference, clip=clip, far_prob=far_prob, seed=seed, planner=plan)
         recorder = None
         if video is not None:

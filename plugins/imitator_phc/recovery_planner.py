@@ -13,7 +13,14 @@ trial, in three modes:
    (:func:`mocap.motion.transform.best_yaw`), is played from its start, turned by that angle and
    moved so that its first root lies under the humanoid's root (:func:`~mocap.motion.transform.yaw_frames`);
    when the clip ends before the humanoid is up (root at ``up_ratio`` x the standing height), its
-   last frame is held at rest, and a humanoid still down ``fallen_steps`` after that starts another;
+   last frame is held at rest, and a humanoid still down ``fallen_steps`` after that starts another
+   (counted from the get-up's start: the clip's duration plus ``fallen_steps`` control steps). With
+   ``getup_clock: pose`` the clip's clock is paced by the humanoid: each step the clip time whose
+   pose is closest to the humanoid's (:func:`pose_features`, searched within ``pose_back_s``
+   before and ``pose_ahead_s`` after the clock) is found, and the clock speeds up while the humanoid
+   is ahead of it (and, with ``pose_lead_s``, slows down when it leads that pose by more than that;
+   :func:`pose_clock_rate`), so the reference keeps pace with a humanoid that gets up faster than
+   the clip;
 2. **approach** (with ``approach_clip``, default ``walk``): after the get-up, while the root is
    farther than ``approach_distance`` from the reference's root, the looping approach clip is
    played, its root placed at the humanoid's, facing the humanoid's heading turned toward the
@@ -41,11 +48,35 @@ from torch import Tensor
 from mocap.getup_starts import GetUpClips
 from mocap_phc.planner_params import GetUpPlannerParams
 from mocap.motion.transform import frames_at_rate, yaw_frames
-from mocap.rotations import heading_angle
+from mocap.rotations import heading_angle, quat_apply, quat_conjugate
 from mocap.state import HUMANOID_FIELDS, MotionFrames
 
 TRACK, GETUP, APPROACH = 0, 1, 2
 MIN_RAMP_S = 1e-9  # approach ramps shorter than this are no ramp (:meth:`GetUpPlanner._warp`)
+HEIGHT_WEIGHT = 10.0  # 1/m^2: in pose_features, 0.1 m of root height weighs as much as a 0.32 rad RMS joint error
+POSE_TIE = 1e-4  # per second away from the clock: among equally close poses (a still segment) the one nearest the clock
+
+
+def pose_clock_rate(lead: Tensor, lead_s: float | None, tau_s: float, max_rate: float) -> Tensor:
+    """The rate a pose-clocked get-up clip runs at when the clock leads the humanoid's matched pose
+    by ``lead`` s: 1 for a lead in [0, lead_s]; beyond it falling linearly to 0 at lead_s + tau_s;
+    below 0 (the humanoid ahead) rising linearly, 1 - lead / tau_s, up to ``max_rate``. ``lead_s``
+    None: 1 for every lead >= 0 (the clock never slows)."""
+    lead_s = math.inf if lead_s is None else lead_s
+    behind = (1.0 - (lead - lead_s) / tau_s).clamp(min=0.0)
+    ahead = (1.0 - lead / tau_s).clamp(max=max_rate)
+    return torch.where(lead > lead_s, behind, torch.where(lead < 0, ahead, torch.ones_like(lead)))
+
+
+def pose_features(root_pos: Tensor, root_rot: Tensor, dof_pos: Tensor) -> Tensor:
+    """(N, D + 4) features of a pose that do not change with a turn about the vertical or a move on
+    the ground: the joint angles over sqrt(D), the world up axis in the root's frame, and the root
+    height times sqrt(HEIGHT_WEIGHT); the squared distance of two is the mean squared joint-angle
+    difference (rad^2) + the squared up-axis difference + HEIGHT_WEIGHT x the squared height difference."""
+    rot = root_rot.double()
+    up = quat_apply(quat_conjugate(rot), torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64).expand(rot.shape[0], 3))
+    dof = dof_pos.double()
+    return torch.cat([dof / math.sqrt(max(1, dof.shape[-1])), up, root_pos[:, 2:3].double() * math.sqrt(HEIGHT_WEIGHT)], dim=-1)
 
 
 def standing_height(library: Any) -> float:
@@ -94,6 +125,8 @@ class GetUpPlanner:
         self.clip = torch.zeros(n, dtype=torch.long)
         self.t0 = torch.zeros(n, dtype=torch.float64)  # clip time at the segment's step `k0`
         self.k0 = torch.zeros(n, dtype=torch.long)
+        self.began = torch.zeros(n, dtype=torch.long)  # the step before the current get-up's first reference
+        self.pose_rate = torch.ones(n, dtype=torch.float64)  # getup_clock 'pose': the rate of the current step
         self.yaw = torch.zeros(n, dtype=torch.float64)
         self.pivot = torch.zeros(n, 2, dtype=torch.float64)
         self.target = torch.zeros(n, 2, dtype=torch.float64)
@@ -140,6 +173,8 @@ class GetUpPlanner:
         self.clip[rows] = clip
         self.t0[rows] = 0.0
         self.k0[rows] = k - 1  # the reference of step k is the clip one control step in
+        self.began[rows] = k - 1
+        self.pose_rate[rows] = 1.0
         self.yaw[rows] = yaw
         self.pivot[rows] = pivot
         self.target[rows] = target
@@ -169,6 +204,37 @@ class GetUpPlanner:
         self.pivot[rows] = now.root_pos[:, :2].double().cpu()
         self.target[rows] = root_pos[rows, :2]
 
+    def matched_times(self, rows: Tensor, now: Tensor, state: Any) -> Tensor:
+        """(R,) for ``rows`` in a get-up: the clip time within ``pose_back_s`` before and
+        ``pose_ahead_s`` after ``now`` (R,), on the control grid, whose pose (:func:`pose_features`)
+        is closest to the humanoid's in ``state`` (ties: the one nearest ``now``)."""
+        p, lib, dt = self.p, self.lib, self.dt
+        dur = lib.durations.double().cpu()[self.clip[rows]]
+        offsets = torch.arange(-round(p.pose_back_s / dt), round(p.pose_ahead_s / dt) + 1, dtype=torch.float64) * dt
+        grid = torch.round(now / dt) * dt  # candidates on the clip's control grid, about the clock
+        cand = torch.minimum((grid[:, None] + offsets[None]).clamp(min=0.0), dur[:, None])  # (R, J)
+        n_rows, n_cand = cand.shape
+        clips = self.clip[rows].repeat_interleave(n_cand)
+        f = lib.frames(clips.to(lib.device), cand.reshape(-1).to(lib.device, lib.dtype))
+        ref = pose_features(f.root_pos.cpu(), f.root_rot.cpu(), f.dof_pos.cpu()).reshape(n_rows, n_cand, -1)
+        rows_d = rows.to(state.root_pos.device)
+        own = pose_features(state.root_pos[rows_d].cpu(), state.root_rot[rows_d].cpu(), state.dof_pos[rows_d].cpu())
+        dist = ((ref - own[:, None]) ** 2).sum(-1) + POSE_TIE * (cand - now[:, None]).abs()
+        return cand.gather(1, dist.argmin(1, keepdim=True)).squeeze(1)
+
+    def _pace_by_pose(self, rows: Tensor, k: int, state: Any) -> None:
+        """``getup_clock: pose``: the clock's lead over the humanoid's matched pose
+        (:meth:`matched_times`) sets the rate the clip runs at this step (:func:`pose_clock_rate`);
+        step ``k``'s reference is that rate x one control step on from the clock's current time."""
+        p, dt = self.p, self.dt
+        now = self._clip_time(k)[rows] - dt  # the clock's time of the state the humanoid is in
+        lead = now - self.matched_times(rows, now, state)
+        lead = torch.where(lead.abs() < 1e-9, 0.0, lead)  # on the clock up to rounding: rate exactly 1
+        rate = pose_clock_rate(lead, p.pose_lead_s, p.pose_tau_s, p.pose_max_rate)
+        self.t0[rows] = now + (rate - 1.0) * dt  # so that the clip time of step k is now + rate x dt
+        self.k0[rows] = k - 1
+        self.pose_rate[rows] = rate
+
     def reference(self, k: int, state: Any, given: MotionFrames) -> MotionFrames:
         p = self.p
         root_pos = state.root_pos.double().cpu()
@@ -178,11 +244,16 @@ class GetUpPlanner:
         self.low = torch.where(down, self.low + 1, torch.zeros_like(self.low))
         dur = self.lib.durations.double().cpu()[self.clip]
         # a get-up whose clip ended fallen_steps ago (its last frame held at rest since) with the humanoid still down
-        stuck = (self.mode == GETUP) & (self._clip_time(k) - dur >= p.fallen_steps * self.dt) & down
+        elapsed = (k - self.began).double() * self.dt  # since the get-up started (its clip time with getup_clock 'time')
+        stuck = (self.mode == GETUP) & (elapsed - dur >= p.fallen_steps * self.dt) & down
         start = ((self.mode != GETUP) & ((self.low >= p.fallen_steps) | (down & (k == 1)))) | stuck
         if bool(start.any()):
             self._start_getup(start.nonzero().squeeze(-1), k, root_pos, root_rot)
             dur = self.lib.durations.double().cpu()[self.clip]
+        if p.getup_clock == "pose":
+            paced = (self.mode == GETUP) & ~start & (self._clip_time(k) - self.dt < dur)
+            if bool(paced.any()):
+                self._pace_by_pose(paced.nonzero().squeeze(-1), k, state)
         up = root_pos[:, 2] >= self.up_ratio * self.standing
         done = (self.mode == GETUP) & (self._clip_time(k) > dur) & up
         far = torch.linalg.vector_norm(root_pos[:, :2] - goal, dim=-1) > p.approach_distance
@@ -208,6 +279,9 @@ class GetUpPlanner:
         held = (self.mode == GETUP) & (self._clip_time(k) >= dur)
         if bool(held.any()):  # the get-up's last frame, held at rest until the mode changes
             frames = frames_at_rate(frames, torch.where(held, 0.0, 1.0))
+        off_pace = (self.mode == GETUP) & ~held & (self.pose_rate != 1.0) if p.getup_clock == "pose" else torch.zeros_like(held)
+        if bool(off_pace.any()):  # a pose-clocked get-up off its own pace: velocities at the rate it is played
+            frames = frames_at_rate(frames, torch.where(off_pace, self.pose_rate, 1.0))
         slow = (self.mode == APPROACH) & (self._rate(k) < 1.0)
         if bool(slow.any()):  # an approach starting slowly: the clip's velocities at the rate it is played
             frames = frames_at_rate(frames, torch.where(slow, self._rate(k), 1.0))
@@ -221,4 +295,4 @@ class GetUpPlanner:
         }
 
 
-__all__ = ["APPROACH", "GETUP", "TRACK", "GetUpPlanner", "GetUpPlannerParams", "select", "standing_height"]
+__all__ = ["APPROACH", "GETUP", "TRACK", "GetUpPlanner", "GetUpPlannerParams", "pose_clock_rate", "pose_features", "select", "standing_height"]
