@@ -7,6 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+import torch
 
 from mocap.matrix import load_cells
 from mocap.pipeline import stage_keys
@@ -47,6 +48,7 @@ def test_reproduce_spec_trains_everything_and_shares_the_imitator():
     covered |= {"imitator_amp_v11"}  # _v8 through the hard-clip curriculum, then continue_v8.yaml (tested below)
     covered |= {"imitator_amp_v12"}  # _v11 after two curriculum cycles (curriculum_hard_v11.yaml, continue_v11.yaml; tested below)
     covered |= {"imitator_amp_v13", "imitator_amp_v14"}  # _v12 and _v13 continued by continue_v12/_v13.yaml (tested below)
+    covered |= {"imitator_amp_v15"}  # _v14 continued by continue_v14.yaml with PHC's fixed sigma (tested below)
     covered |= {"pulse_amp_v2", "pulse_amp_v4"}
     covered |= latents
     assert committed <= covered, f"committed checkpoints without a cell: {committed - covered}"
@@ -280,3 +282,23 @@ def test_imitator_continued_on_all_clips_embeds_its_recipe(name, recipe):
     nxt = load_spec(ROOT / "specs" / "imitator" / f"continue_{name}.yaml", get_plugins()).spec
     assert nxt.motions == spec.motions and nxt.humanoid == spec.humanoid and nxt.imitator.params == spec.imitator.params
     assert Path(nxt.imitator.trainer.params["init_policy"]).resolve() == (ROOT / "checkpoints" / f"imitator_amp_{name}" / "policy.pt").resolve()
+
+
+def test_imitator_v15_is_continue_v14_with_phcs_fixed_sigma():
+    """checkpoints/imitator_amp_v15 embeds continue_v14.yaml with init_log_std -2.9 and learn_std false (PHC's
+    fixed sigma 0.055), from v14, at 10.01M steps; its policy's sigma is that value, and continue_v15.yaml keeps it fixed."""
+    data, embedded = _checkpoint("imitator_amp_v15")
+    recipe = load_spec(ROOT / "specs" / "imitator" / "continue_v14.yaml", get_plugins()).spec
+    assert embedded["name"] == recipe.name and embedded["seed"] == 0 and embedded["motions"]["params"].get("clips") is None
+    trainer = embedded["imitator"]["trainer"]["params"]
+    assert trainer["init_policy"] == "../imitator_amp_v14/policy.pt"
+    assert (trainer["init_log_std"], trainer["learn_std"]) == (-2.9, False) and recipe.imitator.trainer.params["learn_std"] is True
+    assert embedded["imitator"]["params"]["start_sampling"] == recipe.imitator.params["start_sampling"]
+    assert embedded["imitator"]["params"]["getup_starts"] == recipe.imitator.params["getup_starts"]
+    assert data["extra"]["env_steps"] == 10010624
+    assert torch.allclose(data["state_dict"]["log_std"], torch.full_like(data["state_dict"]["log_std"], -2.9))
+    nxt = load_spec(ROOT / "specs" / "imitator" / "continue_v15.yaml", get_plugins()).spec
+    assert nxt.motions == recipe.motions and nxt.humanoid == recipe.humanoid and nxt.imitator.params == recipe.imitator.params
+    params = nxt.imitator.trainer.params
+    assert params["learn_std"] is False and params["init_log_std"] is None
+    assert Path(params["init_policy"]).resolve() == (ROOT / "checkpoints" / "imitator_amp_v15" / "policy.pt").resolve()
