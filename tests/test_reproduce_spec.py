@@ -49,6 +49,7 @@ def test_reproduce_spec_trains_everything_and_shares_the_imitator():
     covered |= {"imitator_amp_v12"}  # _v11 after two curriculum cycles (curriculum_hard_v11.yaml, continue_v11.yaml; tested below)
     covered |= {"imitator_amp_v13", "imitator_amp_v14"}  # _v12 and _v13 continued by continue_v12/_v13.yaml (tested below)
     covered |= {"imitator_amp_v15"}  # _v14 continued by continue_v14.yaml with PHC's fixed sigma (tested below)
+    covered |= {"pulse_amp_v15", "hybrid_rvq_amp_v15"}  # the v7 latent recipes from _v15 with longer budgets (tested below)
     covered |= {"pulse_amp_v2", "pulse_amp_v4"}
     covered |= latents
     assert committed <= covered, f"committed checkpoints without a cell: {committed - covered}"
@@ -242,6 +243,21 @@ def test_the_v11_latent_specs_differ_from_the_v7_ones_only_by_the_teacher(family
     assert Path(v11.imitator.checkpoint).resolve() == (ROOT / "checkpoints" / "imitator_amp_v11" / "policy.pt").resolve()
     assert v11.latent == v7.latent and v11.humanoid == v7.humanoid and v11.motions == v7.motions
     assert v11.imitator.model_copy(update={"checkpoint": None}) == v7.imitator.model_copy(update={"checkpoint": None})
+
+
+@pytest.mark.parametrize(("family", "steps"), [("pulse", 10_000_000), ("hybrid_rvq", 8_000_000)])
+def test_the_v15_latent_specs_differ_from_the_v7_ones_by_teacher_and_budget(family, steps):
+    """specs/latent/<family>_amp_v15.yaml: the v7 recipe with imitator_amp_v15 as the teacher and a longer
+    budget (PULSE 10M env steps instead of 6M, the hybrid 8M instead of 4M); nothing else changed."""
+    plugins = get_plugins()
+    v7 = load_spec(ROOT / "specs" / "latent" / f"{family}_amp_v7.yaml", plugins).spec
+    v15 = load_spec(ROOT / "specs" / "latent" / f"{family}_amp_v15.yaml", plugins).spec
+    assert Path(v15.imitator.checkpoint).resolve() == (ROOT / "checkpoints" / "imitator_amp_v15" / "policy.pt").resolve()
+    assert v15.latent.trainer.params["total_env_steps"] == steps != v7.latent.trainer.params["total_env_steps"]
+    a, b = v7.latent.model_dump(), v15.latent.model_dump()
+    a["trainer"]["params"].pop("total_env_steps"), b["trainer"]["params"].pop("total_env_steps")
+    assert a == b and v15.humanoid == v7.humanoid and v15.motions == v7.motions
+    assert v15.imitator.model_copy(update={"checkpoint": None}) == v7.imitator.model_copy(update={"checkpoint": None})
 
 
 def test_curriculum_hard_v11_is_continue_v11_on_the_hard_clips():
