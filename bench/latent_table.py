@@ -7,7 +7,10 @@ random generation, from the JSON files of ``mocap eval --json`` and ``mocap gene
 
 Each ``--entry NAME=EVAL_JSON[,GENERATION_JSON]``; the teacher row comes from the first eval file
 (``mocap eval`` of a latent embeds its teacher's table); entries distilled from different teachers
-get one teacher row each, before the first entry of that teacher. Writes ``<out>.json`` and ``<out>.md``.
+get one teacher row each, before the first entry of that teacher. ``--teacher EVAL_JSON`` supplies the
+teacher for entries whose eval file does not embed one (the ``imitation_eval.json`` of a run's eval stage,
+e.g. the cells of a comparison spec): their kept clips and MPJPE-g ratio are computed against it with
+``mocap.imitation_eval.compare_tables``. Writes ``<out>.json`` and ``<out>.md``.
 """
 
 from __future__ import annotations
@@ -16,6 +19,8 @@ import argparse
 import json
 import sys
 from pathlib import Path
+
+from mocap.imitation_eval import compare_tables
 
 IMITATION = ("success_rate", "succeeded", "mpjpe_g", "mpjpe_g_succ", "mpjpe_l", "acc_err", "vel_err", "rot_err")
 GENERATION = ("fall_rate", "time_to_fall_s", "diversity_m", "match_distance", "filtered", "coverage")
@@ -45,7 +50,10 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--entry", action="append", required=True, help="NAME=EVAL_JSON[,GENERATION_JSON]")
     ap.add_argument("--out", type=Path, default=Path("bench/results/latent_table"))
+    ap.add_argument("--teacher", type=Path, help="the teacher's eval JSON, for entries whose eval file embeds none")
+    ap.add_argument("--title", default="Latent spaces vs their teacher (bundled clips)", help="the Markdown heading")
     args = ap.parse_args(argv)
+    given = json.loads(args.teacher.read_text()) if args.teacher else None
     rows: dict[str, dict] = {}
     teacher = None
     teachers: dict[str, dict] = {}  # a row per distinct teacher, named after the first entry distilled from it
@@ -54,6 +62,8 @@ def main(argv: list[str] | None = None) -> int:
         paths = files.split(",")
         ev = json.loads(Path(paths[0]).read_text())
         gen = json.loads(Path(paths[1]).read_text()) if len(paths) > 1 else None
+        if "imitator" not in ev and given is not None:
+            ev = {**ev, "imitator": given, "comparison": compare_tables(given, ev)}
         if "imitator" in ev:
             own = row(ev["imitator"], None)
             teacher = own if teacher is None else teacher
@@ -71,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
             lines.append(f"| {label} | " + " | ".join(fmt(teachers[name].get(c)) for c in cols) + " |")
         lines.append(f"| {name} | " + " | ".join(fmt(r.get(c)) for c in cols) + " |")
     args.out.with_suffix(".md").write_text(
-        "# Latent spaces vs their teacher (bundled clips)\n\nImitation: mocap-imitation-v1 (15 clips, mm, "
+        f"# {args.title}\n\nImitation: mocap-imitation-v1 (15 clips, mm, "
         "success out of 15). Generation: mocap-generation-v1 (64 rollouts x 10 s from the prior).\n\n" + "\n".join(lines) + "\n"
     )
     print(args.out.with_suffix(".md").read_text())

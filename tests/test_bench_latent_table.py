@@ -41,3 +41,28 @@ def test_a_single_teacher_keeps_the_plain_label(tmp_path):
     out = tmp_path / "table"
     lt.main(["--entry", f"a={_eval(tmp_path / 'a.json', 10, 11)}", "--entry", f"b={_eval(tmp_path / 'b.json', 8, 11)}", "--out", str(out)])
     assert "| imitator (teacher) |" in out.with_suffix(".md").read_text()
+
+
+def _clips(path: Path, ok: dict[str, tuple[bool, float]]) -> str:
+    clips = {c: {"success": s, "mpjpe_g": m} for c, (s, m) in ok.items()}
+    agg = {"succeeded": sum(s for s, _ in ok.values()), "mpjpe_g": sum(m for _, m in ok.values()) / len(ok)}
+    path.write_text(json.dumps({"aggregate": agg, "clips": clips}))
+    return str(path)
+
+
+def test_a_given_teacher_scores_entries_that_embed_none(tmp_path):
+    """A run's imitation_eval.json has no teacher: --teacher supplies it, kept clips and the ratio on the
+    clips both track are computed against it; an entry that embeds its own teacher keeps that one."""
+    lt = _load()
+    teacher = _clips(tmp_path / "t.json", {"walk": (True, 40.0), "run": (True, 100.0), "spin": (False, 200.0)})
+    cell = _clips(tmp_path / "c.json", {"walk": (True, 60.0), "run": (False, 300.0), "spin": (True, 150.0)})
+    out = tmp_path / "table"
+    args = ["--entry", f"cell={cell}", "--entry", f"own={_eval(tmp_path / 'o.json', 9, 11)}", "--teacher", teacher, "--out", str(out)]
+    assert lt.main([*args, "--title", "Ablations"]) == 0
+    table = json.loads(out.with_suffix(".json").read_text())
+    assert table["latents"]["cell"]["kept_teacher_clips"] == "1/2"
+    assert table["latents"]["cell"]["mpjpe_g_ratio_on_shared"] == 60.0 / 40.0
+    assert table["latents"]["own"]["kept_teacher_clips"] == "1/2" and table["latents"]["own"]["mpjpe_g_ratio_on_shared"] == 1.1
+    assert out.with_suffix(".md").read_text().startswith("# Ablations\n")
+    lt.main(["--entry", f"cell={cell}", "--out", str(out)])  # without --teacher: no teacher, nothing kept
+    assert "kept_teacher_clips" not in json.loads(out.with_suffix(".json").read_text())["latents"]["cell"]
