@@ -53,7 +53,8 @@ Props and what is not supported:
 from __future__ import annotations
 
 import math
-from contextlib import nullcontext
+from collections.abc import Iterator
+from contextlib import contextmanager, nullcontext
 from dataclasses import replace
 from typing import Any
 
@@ -126,6 +127,7 @@ class MujocoWarpSimulator(Simulator):
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
         wp, mjw = import_warp()
         self._wp, self._mjw = wp, mjw
+        self._torch_stream: Any = None  # CUDA: the simulator's own stream (set with the device below)
         self.params = p = params or MujocoWarpParams()
         self.skeleton = skeleton
         self.num_envs = N = int(num_envs)
@@ -165,7 +167,11 @@ class MujocoWarpSimulator(Simulator):
         out = device if device is not None else p.state_device
         self.device = torch.device(out) if out is not None else self.sim_device
         self._is_cuda = self.wp_device.is_cuda
-        self._stream = wp.stream_from_torch(torch.cuda.current_stream(self.sim_device)) if self._is_cuda else None
+        # CUDA: a stream of the simulator's own. A CUDA graph cannot be captured on the legacy default
+        # stream, torch's current stream unless a program switches (Warp: "unknown stream").
+        if self._is_cuda:
+            self._torch_stream = torch.cuda.Stream(self.sim_device)
+        self._stream = wp.stream_from_torch(self._torch_stream) if self._torch_stream is not None else None
         nconmax = p.nconmax or (256 if self.terrain is not None else 128 if p.target is not None else 96)
         njmax = p.njmax or 4 * nconmax + m.nv
         with self._scope():
@@ -298,12 +304,23 @@ class MujocoWarpSimulator(Simulator):
         self._graph = None
 
     # ------------------------------------------------------------------------ internals
-    def _scope(self) -> Any:
-        """Warp calls run on the Warp device and, on CUDA, on torch's current stream (so torch
-        reads and writes of the zero-copy views are ordered with the kernels)."""
-        if self._stream is not None:
-            return self._wp.ScopedStream(self._stream)
-        return self._wp.ScopedDevice(self.wp_device) if hasattr(self, "wp_device") else nullcontext()
+    @contextmanager
+    def _scope(self) -> Iterator[None]:
+        """Warp calls run on the Warp device and, on CUDA, on the simulator's stream, with torch's
+        work inside on that stream too (reads and writes of the zero-copy views are ordered with the
+        kernels). That stream first waits for the caller's stream (its writes to the views or the
+        actions), and the caller's stream waits for it on exit (the state it reads next)."""
+        if self._torch_stream is None:
+            with self._wp.ScopedDevice(self.wp_device) if hasattr(self, "wp_device") else nullcontext():
+                yield
+            return
+        caller = torch.cuda.current_stream(self.sim_device)
+        self._torch_stream.wait_stream(caller)
+        try:
+            with torch.cuda.stream(self._torch_stream), self._wp.ScopedStream(self._stream):
+                yield
+        finally:
+            caller.wait_stream(self._torch_stream)
 
     def _physics_step(self) -> None:
         wp, mjw = self._wp, self._mjw
