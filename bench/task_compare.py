@@ -8,6 +8,11 @@ and a list of seeds, then collects every cell's learning curve from its ``metric
         --latents scratch pulse hybrid_rvq vmp --seeds 0 --steps 500000 --out /tmp/task-compare
     python bench/task_compare.py collect --out /tmp/task-compare --json bench/results/task_compare
 
+``--suffix _v15`` trains ``specs/tasks/<task>_<latent>_v15.yaml`` instead (the latent spaces of the
+14/15-clip teacher). ``collect --task-eval 64`` also evaluates every finished cell's task policy with
+its deterministic action (``mocap task-eval``: 64 envs x ``--task-eval-seconds`` 10 s), the numbers a
+user of the policy gets, beside the training ones (which include exploration noise).
+
 ``run`` is resumable: a finished cell is reused by the pipeline, an interrupted one resumes from
 its checkpoint; cells run in seed-major order, so an early stop still leaves every pairing with
 seed 0. ``collect`` writes ``<json>.json`` (per cell: the curve of ``episode/normalized_return``,
@@ -28,6 +33,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 CURVE_KEYS = ("episode/normalized_return", "episode/length", "episode/success")
+#: the task metric plotted in the third row, per task
+PRIMARY = {"speed": "eval/speed_error", "reach": "eval/success_rate", "strike": "eval/hit_rate", "point_goal": "eval/success_rate"}
 
 
 def cell_name(task: str, latent: str, seed: int) -> str:
@@ -37,7 +44,7 @@ def cell_name(task: str, latent: str, seed: int) -> str:
 def run(args: argparse.Namespace) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     cells = [(t, l, s) for s in args.seeds for t in args.tasks for l in args.latents]
-    missing = [ROOT / "specs" / "tasks" / f"{t}_{l}.yaml" for t, l, _ in cells]
+    missing = [ROOT / "specs" / "tasks" / f"{t}_{l}{args.suffix}.yaml" for t, l, _ in cells]
     missing = [p for p in missing if not p.is_file()]
     if missing:
         print("error: no spec " + ", ".join(str(p.relative_to(ROOT)) for p in missing), file=sys.stderr)
@@ -48,8 +55,11 @@ def run(args: argparse.Namespace) -> int:
         if (cell_dir / "stages.json").is_file() and _finished(cell_dir, args.steps):
             print(f"[{i}/{len(cells)}] {name}: done")
             continue
+        spec = ROOT / "specs" / "tasks" / f"{task}_{latent}{args.suffix}.yaml"
+        cell_dir.mkdir(parents=True, exist_ok=True)
+        (cell_dir / "cell.json").write_text(json.dumps({"task": task, "latent": latent, "seed": seed, "spec": str(spec.relative_to(ROOT))}) + "\n")
         cmd = [
-            sys.executable, "-m", "mocap", "run", str(ROOT / "specs" / "tasks" / f"{task}_{latent}.yaml"),
+            sys.executable, "-m", "mocap", "run", str(spec),
             "--set", f"task.trainer.params.total_env_steps={args.steps}",
             "--set", f"seed={seed}",
             "--out", str(cell_dir), "--store", str(args.out / "artifacts"),
@@ -121,20 +131,34 @@ def collect(args: argparse.Namespace) -> int:
         if not _task_done(cell_dir):
             print(f"skipped {cell_dir.name}: its task stage has not finished")
             continue
-        task, rest = cell_dir.name.split("_", 1)
-        latent, seed = rest.rsplit("_s", 1)
-        cells[cell_dir.name] = {"task": task, "latent": latent, "seed": int(seed), **summarize(rows)}
+        meta_file = cell_dir / "cell.json"
+        if meta_file.is_file():  # written by `run`; names with underscores (point_goal, hybrid_rvq) parse safely
+            meta = json.loads(meta_file.read_text())
+            task, latent, seed = meta["task"], meta["latent"], int(meta["seed"])
+        else:
+            task, rest = cell_dir.name.split("_", 1)
+            latent, seed_text = rest.rsplit("_s", 1)
+            seed = int(seed_text)
+        cells[cell_dir.name] = {"task": task, "latent": latent, "seed": seed, **summarize(rows)}
+        if args.task_eval > 0:
+            from mocap.task_eval import evaluate_task
+
+            print(f"{cell_dir.name}: task-eval, {args.task_eval} envs x {args.task_eval_seconds:g} s", flush=True)
+            result = evaluate_task(cell_dir, num_envs=args.task_eval, seconds=args.task_eval_seconds)
+            cells[cell_dir.name]["task_eval"] = {k: v for k, v in result.items() if isinstance(v, (int, float)) and k != "seed"}
     if not cells:
         print(f"error: no finished cells under {args.out}", file=sys.stderr)
         return 2
     groups: dict[str, dict] = {}
     for c in cells.values():
-        g = groups.setdefault(f"{c['task']}/{c['latent']}", {"seeds": [], "final": {}})
+        g = groups.setdefault(f"{c['task']}/{c['latent']}", {"seeds": [], "final": {}, "task_eval": {}})
         g["seeds"].append(c["seed"])
-        for k, v in c["final"].items():
-            g["final"].setdefault(k, []).append(v)
+        for part in ("final", "task_eval"):
+            for k, v in c.get(part, {}).items():
+                g[part].setdefault(k, []).append(v)
     for g in groups.values():
-        g["final"] = {k: {"mean": sum(v) / len(v), "std": _std(v), "n": len(v)} for k, v in g["final"].items()}
+        for part in ("final", "task_eval"):
+            g[part] = {k: {"mean": sum(v) / len(v), "std": _std(v), "n": len(v)} for k, v in g[part].items()}
     out = {"command": " ".join(["python", "bench/task_compare.py", *sys.argv[1:]]), "groups": groups, "cells": cells}
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.with_suffix(".json").write_text(json.dumps(out, indent=1) + "\n")
@@ -168,6 +192,19 @@ def render_markdown(groups: dict) -> str:
                 cells.append("-" if f is None else f"{f['mean']:.3g} ± {f['std']:.2g}" if f["n"] > 1 else f"{f['mean']:.3g}")
             lines.append(f"| {latent} | {len(g['seeds'])} | " + " | ".join(cells) + " |")
         lines.append("")
+        evaluated = {latent: g for latent, g in rows.items() if g.get("task_eval")}
+        if evaluated:
+            any_eval = next(iter(evaluated.values()))["task_eval"]
+            skip = {"steps", "env_steps", "num_envs", "seconds"}
+            ekeys = [k for k in any_eval if k not in skip]
+            n_env, secs = int(any_eval["num_envs"]["mean"]), any_eval["seconds"]["mean"]
+            lines += [f"Deterministic policy (`mocap task-eval`, mean action, {n_env} envs x {secs:.3g} s):", ""]
+            lines += ["| latent | seeds | " + " | ".join(ekeys) + " |", "|---|---|" + "---|" * len(ekeys)]
+            for latent, g in evaluated.items():
+                vals = [g["task_eval"].get(k) for k in ekeys]
+                cells = ["-" if f is None else f"{f['mean']:.3g} ± {f['std']:.2g}" if f["n"] > 1 else f"{f['mean']:.3g}" for f in vals]
+                lines.append(f"| {latent} | {len(g['seeds'])} | " + " | ".join(cells) + " |")
+            lines.append("")
     return "\n".join(lines)
 
 
@@ -187,18 +224,22 @@ def _plot(cells: dict, path: Path) -> None:
 
     tasks = sorted({c["task"] for c in cells.values()})
     latents = sorted({c["latent"] for c in cells.values()})
-    fig, axes = plt.subplots(2, len(tasks), figsize=(5 * len(tasks), 7), squeeze=False)
+    fig, axes = plt.subplots(3, len(tasks), figsize=(5 * len(tasks), 10), squeeze=False)
     for col, task in enumerate(tasks):
         for latent in latents:
             runs = [c for c in cells.values() if c["task"] == task and c["latent"] == latent]
             if not runs:
                 continue
-            for row, key in enumerate(("episode/normalized_return", "episode/length")):
+            for row, key in enumerate(("episode/normalized_return", "episode/length", PRIMARY.get(task, ""))):
                 if not any(key in point for r in runs for point in r["curve"]):
                     continue
                 n = min(len(r["curve"]) for r in runs)
                 x = np.array([runs[0]["curve"][i]["env_steps"] for i in range(n)]) / 1e6
-                y = np.array([[r["curve"][i].get(key, np.nan) for i in range(n)] for r in runs])
+                y = np.array([[r["curve"][i].get(key, np.nan) for i in range(n)] for r in runs], dtype=float)
+                if np.isnan(y).all(0).any():  # points where no seed logged the metric: not drawn
+                    x, y = x[~np.isnan(y).all(0)], y[:, ~np.isnan(y).all(0)]
+                if not y.size:
+                    continue
                 ax = axes[row][col]
                 (line,) = ax.plot(x, np.nanmean(y, 0), label=f"{latent} ({len(runs)} seed{'s' * (len(runs) > 1)})")
                 if len(runs) > 1:
@@ -206,7 +247,8 @@ def _plot(cells: dict, path: Path) -> None:
         axes[0][col].set_title(task)
         axes[0][col].set_ylabel("normalized return (training episodes)")
         axes[1][col].set_ylabel("episode length (steps)")
-        for row in range(2):
+        axes[2][col].set_ylabel(f"{PRIMARY.get(task, '-').split('/')[-1]} (training episodes)")
+        for row in range(3):
             axes[row][col].set_xlabel("env steps (M)")
             if axes[row][col].get_legend_handles_labels()[0]:
                 axes[row][col].legend(fontsize=8)
@@ -222,10 +264,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--latents", nargs="+", default=["scratch", "pulse", "hybrid_rvq", "vmp"])
     p.add_argument("--seeds", nargs="+", type=int, default=[0])
     p.add_argument("--steps", type=int, default=500_000)
+    p.add_argument("--suffix", default="", help="spec name suffix: specs/tasks/<task>_<latent><suffix>.yaml (e.g. _v15)")
     p.add_argument("--out", type=Path, required=True)
     c = sub.add_parser("collect", help="gather curves and final metrics into JSON and a plot")
     c.add_argument("--out", type=Path, required=True)
     c.add_argument("--json", type=Path, default=Path("bench/results/task_compare"))
+    c.add_argument("--task-eval", type=int, default=0, help="also evaluate each cell's deterministic policy with this many envs (0: no)")
+    c.add_argument("--task-eval-seconds", type=float, default=10.0, help="simulated seconds per env of --task-eval")
     args = parser.parse_args(argv)
     return run(args) if args.command == "run" else collect(args)
 

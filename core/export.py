@@ -2,9 +2,12 @@
 
 ``DEST`` (e.g. ``checkpoints/pulse_amp/``) receives the trained stages' files (``policy.pt`` for an
 imitator, ``latent.pt`` for a latent space) and a ``spec.yaml`` in which every stage names its
-``checkpoint:`` relative to ``DEST``, with no trainer. A stage that the run took from an existing
-checkpoint file (a committed teacher) is referenced where it lies, by a relative path, instead of
-being copied. ``mocap eval DEST`` and ``mocap generate DEST`` then work from any clone.
+``checkpoint:`` relative to ``DEST``, with no trainer (``task_policy.pt`` for a trained ``task`` stage).
+A stage that the run took from an existing checkpoint file (a committed teacher) is referenced where
+it lies, by a relative path, instead of being copied; when that file lies in another checkout of
+the repository (a run made in a git worktree, exported into the main one) and the same file, byte
+for byte, is at the same place in ``DEST``'s checkout, that one is referenced. ``mocap eval DEST``,
+``mocap generate DEST`` and (a task) ``mocap task-eval DEST`` then work from any clone.
 """
 
 from __future__ import annotations
@@ -18,7 +21,27 @@ import yaml
 
 from mocap.hooks import hookimpl
 
-EXPORTED_NAMES = {"imitator": "policy.pt", "latent": "latent.pt"}
+EXPORTED_NAMES = {"imitator": "policy.pt", "latent": "latent.pt", "task": "task_policy.pt"}
+
+
+def _checkout_root(path: Path) -> Path | None:
+    """The nearest folder above ``path`` holding ``.git`` (a clone's folder or a worktree's file)."""
+    for parent in Path(path).resolve().parents:
+        if (parent / ".git").exists():
+            return parent
+    return None
+
+
+def same_file_in_checkout(src: Path, dest: Path) -> Path:
+    """``src``, or the identical file at the same place in ``dest``'s checkout when ``src`` lies in
+    another checkout (module docstring): an export then names no path of the other checkout."""
+    src_root, dest_root = _checkout_root(src), _checkout_root(dest)
+    if src_root is None or dest_root is None or src_root == dest_root:
+        return src
+    twin = dest_root / Path(src).resolve().relative_to(src_root)
+    if twin.is_file() and twin.stat().st_size == Path(src).stat().st_size and twin.read_bytes() == Path(src).read_bytes():
+        return twin
+    return src
 
 
 def export_run(run_dir: Path, dest: Path) -> Path:
@@ -46,7 +69,7 @@ def export_run(run_dir: Path, dest: Path) -> Path:
         if not src.is_file():
             raise UserError(f"{run_dir}: the {stage} checkpoint {src} is missing")
         if section.get("checkpoint"):  # taken from an existing file: reference it where it lies
-            target = src
+            target = same_file_in_checkout(src, dest)
         else:
             target = dest / name
             # the copy's embedded spec names its dependencies relative to DEST (a run's own spec
@@ -56,7 +79,7 @@ def export_run(run_dir: Path, dest: Path) -> Path:
         section.pop("trainer", None)
         exported.append(stage)
     if not exported:
-        raise UserError(f"{run_dir}: no trained imitator or latent stage to export")
+        raise UserError(f"{run_dir}: no trained imitator, latent or task stage to export")
     out = dest / "spec.yaml"
     header = f"# Exported from the run {run_dir.name} by `mocap export`; checkpoint paths are relative to this file.\n"
     atomic_write_text(out, header + yaml.safe_dump(doc, sort_keys=False))
@@ -92,6 +115,8 @@ def relative_spec_text(spec_yaml: str, dest: Path, *, root_map: tuple[str, str] 
     def rel(path: str) -> str:
         if root_map is not None and path.startswith(root_map[0]):
             path = root_map[1] + path[len(root_map[0]) :]
+        if Path(path).is_absolute() and Path(path).is_file():
+            path = str(same_file_in_checkout(Path(path), dest))
         return os.path.relpath(Path(path).resolve(), Path(dest).resolve()) if Path(path).is_absolute() else path
 
     for stage in STAGE_SECTIONS:
@@ -137,4 +162,4 @@ def register_commands(app):  # type: ignore[no-untyped-def]
         print(f"wrote {spec}; evaluate it with `mocap eval {dest}`")
 
 
-__all__ = ["export_run"]
+__all__ = ["export_run", "same_file_in_checkout"]

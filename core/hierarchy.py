@@ -4,13 +4,17 @@ baseline: the task action is the normalized PD target) and defines its params.
 The task env (a task policy acting in the task action space of any latent space, the ``task``
 stage's RL env) and ``scratch``'s module live in :mod:`mocap.task_env`, imported only when a spec
 builds them: loading this plugin imports no torch. Their names are still reachable here
-(``mocap.hierarchy.TaskEnv``).
+(``mocap.hierarchy.TaskEnv``). The plugin's command ``mocap task-eval RUN_DIR`` evaluates a trained
+task policy deterministically (:mod:`mocap.task_eval`).
 """
 
 from __future__ import annotations
 
 import importlib
-from typing import Any
+from pathlib import Path
+from typing import Annotated, Any, Optional
+
+import typer
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -32,6 +36,33 @@ def register_latent_spaces(register):  # type: ignore[no-untyped-def]
         params=ScratchParams,
         description="no latent space: task actions are normalized PD targets (baseline)",
     )
+
+
+@hookimpl
+def register_commands(app):  # type: ignore[no-untyped-def]
+    @app.command("task-eval")
+    def task_eval_command(
+        run_dir: Annotated[Path, typer.Argument(help="a run directory with a finished task stage")],
+        envs: Annotated[int, typer.Option("--envs", help="envs rolled out in parallel")] = 64,
+        seconds: Annotated[float, typer.Option("--seconds", help="simulated time per env, s")] = 10.0,
+        seed: Annotated[Optional[int], typer.Option("--seed", help="start states and goals (default: the stage's seed)")] = None,
+        json_out: Annotated[Optional[Path], typer.Option("--json", help="write the metrics as JSON")] = None,
+    ) -> None:
+        """Evaluate a trained task policy with its deterministic action: the task's metrics in units, falls, episodes."""
+        import json
+
+        from mocap.errors import UserError
+        from mocap.task_eval import evaluate_task, render_task_eval
+
+        try:
+            result = evaluate_task(run_dir, num_envs=envs, seconds=seconds, seed=seed)
+        except ValueError as exc:
+            raise UserError(str(exc)) from None
+        print(render_task_eval(result))
+        if json_out is not None:
+            json_out.parent.mkdir(parents=True, exist_ok=True)
+            json_out.write_text(json.dumps(result, indent=2) + "\n")
+            print(f"wrote {json_out}")
 
 
 #: names defined in :mod:`mocap.task_env`, reachable from here too (imported on first use)

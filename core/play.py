@@ -473,10 +473,11 @@ def render_policy(
         raise UserError(f"--out {str(out)!r}: the video must be a .mp4 or .gif file")
     if seconds is not None and not seconds > 0:
         raise UserError(f"--seconds must be positive, got {seconds:g}")
-    from mocap.task_video import render_task, task_stage
+    from mocap.task_run import is_task_target
+    from mocap.task_video import render_task
 
-    if task_stage(Path(target)) is not None and clip is None and not generate and not imitator_only:
-        # a run with a trained task stage: the task policy acting through its latent space
+    if is_task_target(Path(target)) and clip is None and not generate and not imitator_only:
+        # a run with a trained task stage (or its export): the task policy acting through its latent space
         return render_task(Path(target), Path(out), seconds=seconds or 10.0, seed=seed, width=width, height=height)
     plugins = get_plugins()
     loaded = build_evaluation_target(load_evaluation_target(target, plugins), plugins, motions=motions, use_latent=not imitator_only)

@@ -45,3 +45,40 @@ def test_collect_groups_seeds_and_skips_unfinished_cells(tc, tmp_path):
     last = (18 / 20 + 19 / 20) / 2  # the last 10% of 20 rows: rows 18 and 19
     assert f["n"] == 2 and f["mean"] == pytest.approx(last + 0.25) and f["std"] == pytest.approx(0.5 / 2**0.5)
     assert "| pulse | 2 |" in out.with_suffix(".md").read_text() and out.with_suffix(".png").is_file()
+
+
+def test_cell_json_names_tasks_and_latents_with_underscores(tc, tmp_path):
+    cell = tmp_path / "point_goal_hybrid_rvq_s2"
+    cell.mkdir()
+    (cell / "cell.json").write_text(json.dumps({"task": "point_goal", "latent": "hybrid_rvq", "seed": 2}))
+    (cell / "metrics.jsonl").write_text("\n".join(json.dumps(r) for r in _rows(10)) + "\n")
+    (cell / "stages.json").write_text(json.dumps([{"stage": "task", "checkpoint": "policy.pt"}]))
+    out = tmp_path / "res"
+    assert tc.main(["collect", "--out", str(tmp_path), "--json", str(out)]) == 0
+    data = json.loads(out.with_suffix(".json").read_text())
+    c = data["cells"]["point_goal_hybrid_rvq_s2"]
+    assert (c["task"], c["latent"], c["seed"]) == ("point_goal", "hybrid_rvq", 2)
+    assert "point_goal/hybrid_rvq" in data["groups"]
+
+
+def test_collect_with_task_eval_evaluates_the_deterministic_policy(tc, tmp_path):
+    from mocap.testing import invoke
+
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(
+        "spec_version: 1\nname: tiny\nseed: 0\nhumanoid: {name: amp}\nmotions: {name: deepmimic, params: {clips: [walk]}}\n"
+        "simulator: {name: mujoco, params: {threads: 1}}\nlatent: {name: scratch}\ntask:\n  name: speed\n  trainer:\n    name: ppo\n"
+        "    params: {num_envs: 2, horizon: 8, total_env_steps: 32, epochs: 1, minibatch_size: 16, torch_threads: 1, actor_hidden: [16], critic_hidden: [16]}\n"
+    )
+    runs = tmp_path / "runs"
+    cell = runs / "speed_scratch_s0"
+    assert invoke(["run", spec, "--out", cell]).exit_code == 0
+    (cell / "cell.json").write_text(json.dumps({"task": "speed", "latent": "scratch", "seed": 0}))
+    out = tmp_path / "res"
+    assert tc.main(["collect", "--out", str(runs), "--json", str(out), "--task-eval", "2", "--task-eval-seconds", "0.5"]) == 0
+    data = json.loads(out.with_suffix(".json").read_text())
+    ev = data["cells"]["speed_scratch_s0"]["task_eval"]
+    assert ev["steps"] == 30 and ev["num_envs"] == 2 and ev["speed_error"] >= 0.0  # 2 envs x 15 control steps
+    assert data["groups"]["speed/scratch"]["task_eval"]["speed_error"]["mean"] == pytest.approx(ev["speed_error"])
+    md = out.with_suffix(".md").read_text()
+    assert "Deterministic policy (`mocap task-eval`, mean action, 2 envs x 0.5 s)" in md and "| scratch | 1 |" in md

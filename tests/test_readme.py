@@ -108,6 +108,7 @@ TINY: dict[str, list[str] | None] = {
         "eval=null",
     ],
     "mocap render runs/speed-scratch --out speed.mp4": ["--seconds", "0.5"],
+    "mocap task-eval runs/speed-scratch --json speed_eval.json": ["--envs", "2", "--seconds", "0.5"],
     "mocap switches": None,
     "mocap checkpoint convert OLD.pt --trust": None,  # OLD.pt: a stand-in written by the test
 }

@@ -1,4 +1,5 @@
-"""`mocap render RUN_DIR` of a trained task run (mocap.task_video) and the tasks' video markers."""
+"""A trained task run reopened (mocap.task_run): `mocap render RUN_DIR` (mocap.task_video), `mocap task-eval
+RUN_DIR` (mocap.task_eval), and the tasks' video markers."""
 
 from __future__ import annotations
 
@@ -35,11 +36,19 @@ def amp():
     return get_plugins().get("humanoid", "amp").build({})
 
 
-def test_render_a_task_run(tmp_path: Path):
-    spec = tmp_path / "spec.yaml"
+@pytest.fixture(scope="module")
+def task_run(tmp_path_factory) -> Path:
+    """A finished (tiny) strike run through scratch."""
+    tmp = tmp_path_factory.mktemp("task_run")
+    spec = tmp / "spec.yaml"
     spec.write_text(SPEC)
-    run = tmp_path / "run"
+    run = tmp / "run"
     assert invoke(["run", spec, "--out", run]).exit_code == 0
+    return run
+
+
+def test_render_a_task_run(task_run: Path, tmp_path: Path):
+    run = task_run
     assert task_stage(run)["stage"] == "task"
     out = tmp_path / "strike.gif"
     result = invoke(["render", run, "--seconds", "0.2", "--width", "64", "--height", "48", "--out", out])
@@ -49,6 +58,52 @@ def test_render_a_task_run(tmp_path: Path):
 
     frames = iio.imread(out, index=None)
     assert frames.shape[0] == 6 and frames.shape[1:3] == (48, 64)
+
+
+def test_task_eval_counts_every_env_step_and_is_deterministic(task_run: Path, tmp_path: Path):
+    out = tmp_path / "eval.json"
+    result = invoke(["task-eval", task_run, "--envs", "3", "--seconds", "1", "--json", out])
+    assert result.exit_code == 0, result.output
+    assert "task strike through scratch" in result.stdout and "| hit_rate |" in result.stdout
+    r = json.loads(out.read_text())
+    assert r["task"] == "strike" and r["latent"] == "scratch" and r["num_envs"] == 3
+    assert r["env_steps"] == 90 and r["steps"] == 90  # 3 envs x 30 control steps, each counted by the task once
+    assert r["seconds"] == pytest.approx(1.0)
+    assert 0.0 <= r["terminated_share"] <= 1.0 and r["envs_never_terminated"] in (0.0, 1 / 3, 2 / 3, 1.0)
+    # an env that terminated ended an episode
+    assert r["episodes"] >= round(3 * (1.0 - r["envs_never_terminated"]))
+    if r["episodes"] == 0:
+        assert math.isnan(r["episode_return"]) and r["envs_never_terminated"] == 1.0
+    from mocap.task_eval import evaluate_task
+
+    again = evaluate_task(task_run, num_envs=3, seconds=1.0)
+    assert {k: v for k, v in again.items() if isinstance(v, float) and not math.isnan(v)} == {
+        k: v for k, v in r.items() if isinstance(v, float) and not math.isnan(v)
+    }
+    # episodes restart at the episode length: 12 s of a 10 s episode ends at least one per env
+    longer = evaluate_task(task_run, num_envs=2, seconds=12.0)
+    assert longer["episodes"] >= 2 and not math.isnan(longer["episode_length"]) and longer["episode_length"] <= 300
+
+
+def test_an_exported_task_run_evaluates_and_renders_as_the_run(task_run: Path, tmp_path: Path):
+    ck = tmp_path / "checkpoints" / "strike_tiny"
+    assert invoke(["export", task_run, ck]).exit_code == 0
+    assert (ck / "task_policy.pt").is_file() and "checkpoint: task_policy.pt" in (ck / "spec.yaml").read_text()
+    from mocap.task_eval import evaluate_task
+    from mocap.task_run import is_task_target
+
+    assert is_task_target(ck) and is_task_target(task_run) and not is_task_target(tmp_path)
+    a, b = evaluate_task(task_run, num_envs=2, seconds=0.5), evaluate_task(ck, num_envs=2, seconds=0.5)
+    assert {k: v for k, v in a.items() if k != "policy"} == {k: v for k, v in b.items() if k != "policy"}  # same seed, same rollout
+    result = invoke(["render", ck, "--seconds", "0.1", "--width", "64", "--height", "48", "--out", tmp_path / "s.gif"])
+    assert result.exit_code == 0 and "task strike through scratch" in result.stdout, result.output
+
+
+def test_task_eval_errors_are_one_line(task_run: Path, tmp_path: Path):
+    result = invoke(["task-eval", tmp_path])
+    assert result.exit_code == 2 and "no finished task stage" in result.stderr and "Traceback" not in result.stderr
+    result = invoke(["task-eval", task_run, "--envs", "0"])
+    assert result.exit_code == 2 and "num_envs >= 1" in result.stderr
 
 
 def test_task_stage_of_other_directories(tmp_path: Path):

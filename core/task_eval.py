@@ -1,0 +1,87 @@
+"""Deterministic evaluation of a trained task policy: ``mocap task-eval RUN_DIR``.
+
+Training logs a task's metrics from its exploring rollouts; this measures the policy a user gets.
+:func:`evaluate_task` reopens the task stage of a run directory with ``num_envs`` envs
+(:func:`mocap.task_run.open_task_run`), rolls the task policy out with its deterministic action for
+``seconds`` of simulated time, episodes restarting as in training (on termination, e.g. a fall, or
+at the episode length), and reports:
+
+* the task's own metrics over every env step of the window (:meth:`Task.metrics`, in the task's
+  units: ``speed_error`` in m/s for ``speed``, ``success_rate`` and distances in m for ``reach``, ...);
+* ``episodes``: episodes that ended in the window; ``terminated_share``: the share of those that
+  ended by termination (for every built-in task a fall, or an unstable step);
+* ``envs_never_terminated``: the share of the envs that ran the whole window without a termination;
+* ``episode_return`` / ``episode_length`` (control steps): means over the ended episodes (NaN if none);
+* ``env_steps``, ``seconds``, ``num_envs``, ``seed``.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from mocap.task_run import open_task_run
+
+
+def evaluate_task(run_dir: Path, *, num_envs: int = 64, seconds: float = 10.0, seed: int | None = None) -> dict[str, Any]:
+    """The metrics of the module docstring for the task policy of ``run_dir``."""
+    if num_envs < 1 or not seconds > 0:
+        raise ValueError(f"task-eval needs num_envs >= 1 and seconds > 0, got {num_envs} and {seconds}")
+    run = open_task_run(Path(run_dir), num_envs, seed)
+    env = run.env
+    try:
+        steps = max(1, int(round(seconds / float(env.sim.dt))))
+        obs = env.reset()
+        env.task.metrics()  # drop anything the reset accumulated
+        ever_terminated = torch.zeros(num_envs, dtype=torch.bool)
+        returns: list[torch.Tensor] = []
+        lengths: list[torch.Tensor] = []
+        ended = terminated = 0
+        for _ in range(steps):
+            result = env.step(run.act(obs))
+            obs = result.obs
+            term = result.terminated.bool().cpu()
+            done = term | result.truncated.bool().cpu()
+            ever_terminated |= term
+            ended += int(done.sum())
+            terminated += int(term.sum())
+            if "return" in result.episodes:
+                returns.append(result.episodes["return"].double().reshape(-1))
+                lengths.append(result.episodes["length"].double().reshape(-1))
+        task_metrics = {k: float(v) for k, v in env.task.metrics().items()}
+        dt = float(env.sim.dt)
+    finally:
+        run.close()
+    ret = torch.cat(returns) if returns else torch.zeros(0, dtype=torch.float64)
+    length = torch.cat(lengths) if lengths else torch.zeros(0, dtype=torch.float64)
+    spec = run.resolved.spec
+    return {
+        "task": spec.task.name,
+        "latent": spec.latent.name,
+        "policy": str(run.policy_path),
+        **task_metrics,
+        "episodes": ended,
+        "terminated_share": terminated / ended if ended else 0.0,
+        "envs_never_terminated": float((~ever_terminated).float().mean()),
+        "episode_return": float(ret.mean()) if ret.numel() else math.nan,
+        "episode_length": float(length.mean()) if length.numel() else math.nan,
+        "env_steps": steps * num_envs,
+        "seconds": steps * dt,
+        "num_envs": num_envs,
+        "seed": seed,
+        "protocol": "deterministic task policy (mean action), episodes restart on termination or at the episode length",
+    }
+
+
+def render_task_eval(result: dict[str, Any]) -> str:
+    """A Markdown table of one :func:`evaluate_task` result."""
+    skip = {"task", "latent", "policy", "protocol", "seed"}
+    rows = [f"| {k} | {v:.4g} |" if isinstance(v, float) else f"| {k} | {v} |" for k, v in result.items() if k not in skip]
+    head = f"task {result['task']} through {result['latent']} ({result['protocol']})"
+    return "\n".join([head, "", "| metric | value |", "|---|---|", *rows, ""])
+
+
+__all__ = ["evaluate_task", "render_task_eval"]
