@@ -56,8 +56,18 @@ class ImitationEvalParams(BaseModel):
     )
 
 
+class TaskEvalParams(BaseModel):  # the ``task`` part of ``eval_suite`` (:mod:`mocap.task_eval`)
+    model_config = ConfigDict(extra="forbid")
+    num_envs: int = Field(64, ge=1, description="envs rolled out in parallel with the deterministic task policy")
+    seconds: float = Field(10.0, gt=0, description="simulated time per env, s (episodes restart as in training)")
+    video_seconds: float = Field(10.0, ge=0, description="video of env 0 over the first seconds, goals as markers (0: none)")
+
+
 class EvalSuiteParams(BaseModel):  # the trainer ``eval_suite`` (:mod:`mocap.suite`)
     model_config = ConfigDict(extra="forbid")
+    task: TaskEvalParams | None = Field(
+        default_factory=TaskEvalParams, description="the task policy's deterministic rollouts (None: skip; skipped anyway without a task stage)"
+    )
     imitation: ImitationEvalParams | None = Field(default_factory=ImitationEvalParams, description="imitation protocol on every clip (None: skip)")
     generation: GenerationParams | None = Field(
         default_factory=GenerationParams, description="random generation from the prior (None: skip; skipped anyway without a prior)"

@@ -11,7 +11,15 @@ A spec may carry, next to its usual fields::
 
 Each cell is the spec with every path set to one of its values (the cartesian product; a value
 replaces what is at the path, like ``--set``; relative ``checkpoint:`` paths inside values are
-relative to the spec file). Cells run one after another, or ``--jobs K`` at a time in separate
+relative to the spec file). An axis may set several paths together (a *zipped* axis): its key
+joins the paths with commas and each value is a list with one entry per path, e.g. a latent space
+with the task policy trained through it::
+
+      latent, task.checkpoint:
+        - [{name: scratch}, ../checkpoints/speed_scratch/task_policy.pt]
+        - [{name: pulse, checkpoint: ...}, ../checkpoints/speed_pulse/task_policy.pt]
+
+A zipped value is labelled by its first entry. Cells run one after another, or ``--jobs K`` at a time in separate
 processes, under ``runs/<name>/<cell>/`` with one artifact store ``runs/<name>/artifacts``, so a
 stage that several cells share (the same section and upstream) is trained once: a per-artifact
 lock makes parallel cells wait for each other instead of training it twice.
@@ -65,6 +73,16 @@ def _label(value: Any) -> str:
     return str(value)
 
 
+def _axis_name(path: str) -> str:
+    """An axis's short name: the last part of its (first) path."""
+    return path.split(",")[0].strip().split(".")[-1]
+
+
+def _fmt(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
 def _safe(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.=-]+", "_", text).strip("_") or "x"
 
@@ -95,10 +113,14 @@ def expand(doc: dict[str, Any], base_dir: Path, source: str = "<spec>") -> list[
         raise SpecError(source, [SpecIssue("matrix", "must be a mapping of field paths to lists of values")])
     axes = []
     for path, values in matrix.items():
-        if not isinstance(path, str) or not path or any(not p for p in path.split(".")):
+        paths = [q.strip() for q in path.split(",")] if isinstance(path, str) else []
+        if not paths or any(not q or any(not part for part in q.split(".")) for q in paths):
             raise SpecError(source, [SpecIssue("matrix", f"bad field path {path!r} (use dotted names, e.g. task.name)")])
         if not isinstance(values, list) or not values:
             raise SpecError(source, [SpecIssue(f"matrix.{path}", "must be a non-empty list of values")])
+        for v in values if len(paths) > 1 else ():
+            if not isinstance(v, list) or len(v) != len(paths):
+                raise SpecError(source, [SpecIssue(f"matrix.{path}", f"each value must be a list of {len(paths)} entries, one per path (got {_fmt(v)})")])
         axes.append((path, values))
     count = math.prod(len(values) for _, values in axes)
     if count > MAX_CELLS:
@@ -109,10 +131,16 @@ def expand(doc: dict[str, Any], base_dir: Path, source: str = "<spec>") -> list[
         cell_doc = copy.deepcopy(doc)
         labels = {}
         for (path, _), value in zip(axes, combo):
-            _set(cell_doc, path, value)
-            labels[path] = _label(value)
+            paths = [q.strip() for q in path.split(",")]
+            if len(paths) == 1:
+                _set(cell_doc, path, value)
+                labels[path] = _label(value)
+            else:  # a zipped axis: one entry per path, labelled by the first
+                for q, v in zip(paths, value):
+                    _set(cell_doc, q, v)
+                labels[path] = _label(value[0])
         _rebase_paths(cell_doc, base_dir)
-        name = "_".join(_safe(f"{path.split('.')[-1]}-{labels[path]}") for path, _ in axes)
+        name = "_".join(_safe(f"{_axis_name(path)}-{labels[path]}") for path, _ in axes)
         cells.append(Cell(name, labels, cell_doc))
     names = [c.name for c in cells]
     if len(set(names)) != len(names):
@@ -321,7 +349,7 @@ def comparison(cells: list[Cell], out_dir: Path, seed_axis: str = "seed") -> dic
     rows = {c.name: {"labels": c.labels, "metrics": metrics[c.name]} for c in cells}
     groups: dict[str, list[str]] = {}
     for c in cells:
-        key = ", ".join(f"{p.split('.')[-1]}={v}" for p, v in c.labels.items() if p != seed_axis) or "all"
+        key = ", ".join(f"{_axis_name(p)}={v}" for p, v in c.labels.items() if p != seed_axis) or "all"
         groups.setdefault(key, []).append(c.name)
     summary: dict[str, dict[str, MetricSummary]] = {}
     for key, names in groups.items():

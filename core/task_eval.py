@@ -8,7 +8,7 @@ at the episode length), and reports:
 
 * the task's own metrics over every env step of the window (:meth:`Task.metrics`, in the task's
   units: ``speed_error`` in m/s for ``speed``, ``success_rate`` and distances in m for ``reach``, ...);
-* ``episodes``: episodes that ended in the window; ``terminated_share``: the share of those that
+* ``episodes_ended``: episodes that ended in the window; ``terminated_share``: the share of those that
   ended by termination (for every built-in task a fall, or an unstable step);
 * ``envs_never_terminated``: the share of the envs that ran the whole window without a termination;
 * ``episode_return`` / ``episode_length`` (control steps): means over the ended episodes (NaN if none);
@@ -23,7 +23,7 @@ from typing import Any
 
 import torch
 
-from mocap.task_run import open_task_run
+from mocap.task_run import TaskRun, open_task_run
 
 
 def evaluate_task(run_dir: Path, *, num_envs: int = 64, seconds: float = 10.0, seed: int | None = None) -> dict[str, Any]:
@@ -31,39 +31,53 @@ def evaluate_task(run_dir: Path, *, num_envs: int = 64, seconds: float = 10.0, s
     if num_envs < 1 or not seconds > 0:
         raise ValueError(f"task-eval needs num_envs >= 1 and seconds > 0, got {num_envs} and {seconds}")
     run = open_task_run(Path(run_dir), num_envs, seed)
-    env = run.env
     try:
-        steps = max(1, int(round(seconds / float(env.sim.dt))))
-        obs = env.reset()
-        env.task.metrics()  # drop anything the reset accumulated
-        ever_terminated = torch.zeros(num_envs, dtype=torch.bool)
-        returns: list[torch.Tensor] = []
-        lengths: list[torch.Tensor] = []
-        ended = terminated = 0
-        for _ in range(steps):
-            result = env.step(run.act(obs))
-            obs = result.obs
-            term = result.terminated.bool().cpu()
-            done = term | result.truncated.bool().cpu()
-            ever_terminated |= term
-            ended += int(done.sum())
-            terminated += int(term.sum())
-            if "return" in result.episodes:
-                returns.append(result.episodes["return"].double().reshape(-1))
-                lengths.append(result.episodes["length"].double().reshape(-1))
-        task_metrics = {k: float(v) for k, v in env.task.metrics().items()}
-        dt = float(env.sim.dt)
+        result = evaluate_task_run(run, seconds=seconds)
     finally:
         run.close()
+    result["seed"] = seed
+    return result
+
+
+def evaluate_task_run(run: TaskRun, *, seconds: float = 10.0, video: Path | None = None, video_seconds: float = 10.0) -> dict[str, Any]:
+    """:func:`evaluate_task` on an opened task stage (its env's ``num_envs``), recording env 0 for the
+    first ``video_seconds`` into ``video`` when given (goals as markers, as ``mocap render``)."""
+    env = run.env
+    num_envs = int(env.num_envs)
+    steps = max(1, int(round(seconds / float(env.sim.dt))))
+    recorder = env.sim.make_recorder() if video is not None else None
+    rec_steps = min(steps, int(round(video_seconds / float(env.sim.dt)))) if recorder is not None else 0
+    obs = env.reset()
+    env.task.metrics()  # drop anything the reset accumulated
+    ever_terminated = torch.zeros(num_envs, dtype=torch.bool)
+    returns: list[torch.Tensor] = []
+    lengths: list[torch.Tensor] = []
+    ended = terminated = 0
+    for t in range(steps):
+        result = env.step(run.act(obs))
+        obs = result.obs
+        if t < rec_steps:
+            assert recorder is not None
+            recorder.add_frame(env.sim.state, markers=env.task.markers(0))
+        term = result.terminated.bool().cpu()
+        done = term | result.truncated.bool().cpu()
+        ever_terminated |= term
+        ended += int(done.sum())
+        terminated += int(term.sum())
+        if "return" in result.episodes:
+            returns.append(result.episodes["return"].double().reshape(-1))
+            lengths.append(result.episodes["length"].double().reshape(-1))
+    task_metrics = {k: float(v) for k, v in env.task.metrics().items()}
+    dt = float(env.sim.dt)
     ret = torch.cat(returns) if returns else torch.zeros(0, dtype=torch.float64)
     length = torch.cat(lengths) if lengths else torch.zeros(0, dtype=torch.float64)
     spec = run.resolved.spec
-    return {
+    out: dict[str, Any] = {
         "task": spec.task.name,
         "latent": spec.latent.name,
         "policy": str(run.policy_path),
         **task_metrics,
-        "episodes": ended,
+        "episodes_ended": ended,
         "terminated_share": terminated / ended if ended else 0.0,
         "envs_never_terminated": float((~ever_terminated).float().mean()),
         "episode_return": float(ret.mean()) if ret.numel() else math.nan,
@@ -71,17 +85,20 @@ def evaluate_task(run_dir: Path, *, num_envs: int = 64, seconds: float = 10.0, s
         "env_steps": steps * num_envs,
         "seconds": steps * dt,
         "num_envs": num_envs,
-        "seed": seed,
         "protocol": "deterministic task policy (mean action), episodes restart on termination or at the episode length",
     }
+    if recorder is not None and video is not None and rec_steps:
+        recorder.save(video)
+        out["video"] = str(video)
+    return out
 
 
 def render_task_eval(result: dict[str, Any]) -> str:
     """A Markdown table of one :func:`evaluate_task` result."""
-    skip = {"task", "latent", "policy", "protocol", "seed"}
+    skip = {"task", "latent", "policy", "protocol", "seed", "video"}
     rows = [f"| {k} | {v:.4g} |" if isinstance(v, float) else f"| {k} | {v} |" for k, v in result.items() if k not in skip]
     head = f"task {result['task']} through {result['latent']} ({result['protocol']})"
     return "\n".join([head, "", "| metric | value |", "|---|---|", *rows, ""])
 
 
-__all__ = ["evaluate_task", "render_task_eval"]
+__all__ = ["evaluate_task", "evaluate_task_run", "render_task_eval"]

@@ -79,15 +79,10 @@ class TaskRun:
 
 def open_task_run(run_dir: Path, num_envs: int = 1, seed: int | None = None) -> TaskRun:
     """Reopen the task stage of ``run_dir`` (module docstring); errors are one :class:`UserError`."""
-    from rich.console import Console
-
-    from mocap.interfaces import Box, StageResult
-    from mocap.pipeline import StageContext, derive_seed
+    from mocap.interfaces import StageResult
+    from mocap.pipeline import derive_seed
     from mocap.plugins import get_plugins
-    from mocap.rl.networks import load_policy
-    from mocap.runlog import MetricsLogger
     from mocap.spec import SpecError, load_spec
-    from mocap.task_env import make_task_env
 
     run_dir = Path(run_dir)
     spec_file = run_dir / "spec.yaml"
@@ -119,10 +114,26 @@ def open_task_run(run_dir: Path, num_envs: int = 1, seed: int | None = None) -> 
         seed_default = int(stage.get("seed", 0))
     if not policy_path.is_file():
         raise UserError(f"{run_dir}: the task policy {policy_path} does not exist (moved?)")
+    return open_task_stage(resolved, plugins, upstream, policy_path, num_envs, seed_default if seed is None else int(seed))
+
+
+def open_task_stage(resolved: Any, plugins: Any, upstream: dict[str, Any], policy_path: Path, num_envs: int, seed: int) -> TaskRun:
+    """The task env of a resolved spec (its frozen ``imitator``/``latent`` stages in ``upstream``)
+    with ``num_envs`` envs, and the task policy at ``policy_path``: what :func:`open_task_run`
+    builds from a run directory, and the ``eval_suite`` trainer from its pipeline stage."""
+    from rich.console import Console
+
+    from mocap.interfaces import Box
+    from mocap.pipeline import StageContext
+    from mocap.rl.networks import load_policy
+    from mocap.runlog import MetricsLogger
+    from mocap.task_env import make_task_env
+
+    upstream = {k: v for k, v in upstream.items() if k in ("imitator", "latent")}
     with tempfile.TemporaryDirectory() as tmp:
         ctx = StageContext(
             stage="task", resolved=resolved, plugins=plugins, workdir=Path(tmp), run_dir=Path(tmp), upstream=upstream,
-            log=MetricsLogger(Path(tmp) / "metrics.jsonl", "task", enabled=False), seed=seed_default if seed is None else int(seed),
+            log=MetricsLogger(Path(tmp) / "metrics.jsonl", "task", enabled=False), seed=int(seed),
             device=torch.device("cpu"), console=Console(stderr=True, quiet=True),
         )  # fmt: skip
         env = make_task_env(ctx, num_envs)
@@ -134,7 +145,7 @@ def open_task_run(run_dir: Path, num_envs: int = 1, seed: int | None = None) -> 
     policy.eval()
     space = env.action_space
     bounds = (space.low, space.high) if isinstance(space, Box) and (space.low != float("-inf") or space.high != float("inf")) else None
-    return TaskRun(env=env, policy=policy, resolved=resolved, bounds=bounds, policy_path=policy_path)
+    return TaskRun(env=env, policy=policy, resolved=resolved, bounds=bounds, policy_path=Path(policy_path))
 
 
-__all__ = ["TaskRun", "is_task_target", "open_task_run", "task_stage"]
+__all__ = ["TaskRun", "is_task_target", "open_task_run", "open_task_stage", "task_stage"]

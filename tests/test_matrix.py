@@ -41,9 +41,35 @@ def test_expand_is_the_cartesian_product_with_readable_names(tmp_path):
     assert expand({"name": "x"}, tmp_path)[0].name == ""
 
 
+def test_a_zipped_axis_sets_its_paths_together(tmp_path):
+    doc = {
+        "name": "x",
+        "task": {"name": "speed"},
+        "matrix": {
+            "latent, task.checkpoint": [[{"name": "scratch"}, "ck/s.pt"], [{"name": "pulse", "checkpoint": "ck/l.pt"}, "ck/p.pt"]],
+            "seed": [0, 1],
+        },
+    }
+    cells = expand(doc, tmp_path)
+    assert len(cells) == 4  # 2 zipped values x 2 seeds, not 2 x 2 x 2
+    pulse = [c for c in cells if c.labels["latent, task.checkpoint"] == "pulse"]
+    assert [c.name for c in pulse] == ["latent-pulse_seed-0", "latent-pulse_seed-1"]
+    assert pulse[0].doc["latent"] == {"name": "pulse", "checkpoint": str((tmp_path / "ck" / "l.pt").resolve())}
+    assert pulse[0].doc["task"] == {"name": "speed", "checkpoint": str((tmp_path / "ck" / "p.pt").resolve())}  # with its own policy
+    scratch = next(c for c in cells if c.labels["latent, task.checkpoint"] == "scratch")
+    assert scratch.doc["task"]["checkpoint"] == str((tmp_path / "ck" / "s.pt").resolve()) and scratch.doc["latent"] == {"name": "scratch"}
+
+
 @pytest.mark.parametrize(
     "matrix, message",
-    [({"seed": []}, "non-empty list"), ({"": [1]}, "bad field path"), ({"latent": [{"name": "a"}, {"name": "a"}]}, "same name")],
+    [
+        ({"seed": []}, "non-empty list"),
+        ({"": [1]}, "bad field path"),
+        ({"latent": [{"name": "a"}, {"name": "a"}]}, "same name"),
+        ({"latent, seed": [[{"name": "a"}, 0], [{"name": "b"}]]}, "list of 2 entries"),
+        ({"latent, seed": [{"name": "a"}]}, "list of 2 entries"),
+        ({"latent, ": [[1, 2]]}, "bad field path"),
+    ],
 )
 def test_bad_matrices_are_clear_errors(tmp_path, matrix, message):
     with pytest.raises(SpecError, match=message):

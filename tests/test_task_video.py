@@ -71,8 +71,8 @@ def test_task_eval_counts_every_env_step_and_is_deterministic(task_run: Path, tm
     assert r["seconds"] == pytest.approx(1.0)
     assert 0.0 <= r["terminated_share"] <= 1.0 and r["envs_never_terminated"] in (0.0, 1 / 3, 2 / 3, 1.0)
     # an env that terminated ended an episode
-    assert r["episodes"] >= round(3 * (1.0 - r["envs_never_terminated"]))
-    if r["episodes"] == 0:
+    assert r["episodes_ended"] >= round(3 * (1.0 - r["envs_never_terminated"]))
+    if r["episodes_ended"] == 0:
         assert math.isnan(r["episode_return"]) and r["envs_never_terminated"] == 1.0
     from mocap.task_eval import evaluate_task
 
@@ -82,7 +82,7 @@ def test_task_eval_counts_every_env_step_and_is_deterministic(task_run: Path, tm
     }
     # episodes restart at the episode length: 12 s of a 10 s episode ends at least one per env
     longer = evaluate_task(task_run, num_envs=2, seconds=12.0)
-    assert longer["episodes"] >= 2 and not math.isnan(longer["episode_length"]) and longer["episode_length"] <= 300
+    assert longer["episodes_ended"] >= 2 and not math.isnan(longer["episode_length"]) and longer["episode_length"] <= 300
 
 
 def test_an_exported_task_run_evaluates_and_renders_as_the_run(task_run: Path, tmp_path: Path):
@@ -147,3 +147,23 @@ def test_strike_markers_show_the_target_top(amp):
         assert np.allclose(top[0] - centre[0], [0.0, 0.0, task.params.half_size[2]], atol=1e-4)
     finally:
         sim.close()
+
+
+def test_eval_suite_evaluates_the_task_stage(tmp_path: Path):
+    """``eval_suite``'s ``task`` part: the deterministic policy's metrics under ``task_eval/`` and a video."""
+    spec = tmp_path / "spec.yaml"
+    suite = "eval:\n  trainer:\n    name: eval_suite\n    params: {imitation: null, generation: null, task: {num_envs: 3, seconds: 0.5, video_seconds: 0.2}}\n"
+    spec.write_text(SPEC + suite)
+    run = tmp_path / "run"
+    result = invoke(["run", spec, "--out", run])
+    assert result.exit_code == 0, result.output
+    stages = {s["stage"]: s for s in json.loads((run / "stages.json").read_text())}
+    metrics = stages["eval"]["metrics"]
+    assert metrics["task_eval/env_steps"] == 45 and metrics["task_eval/steps"] == 45  # 3 envs x 15 control steps
+    assert 0.0 <= metrics["task_eval/reward"] <= 1.0 and "task_eval/video" not in metrics
+    assert "| reward |" in (run / "task_eval.md").read_text() and (run / "task.mp4").stat().st_size > 0
+    # the same numbers as `mocap task-eval` of the run with the eval stage's seed
+    from mocap.task_eval import evaluate_task
+
+    again = evaluate_task(run, num_envs=3, seconds=0.5, seed=stages["eval"]["seed"])
+    assert again["steps"] == metrics["task_eval/steps"] and again["reward"] == pytest.approx(metrics["task_eval/reward"])
