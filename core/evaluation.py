@@ -74,6 +74,17 @@ class EvalSuiteParams(BaseModel):  # the trainer ``eval_suite`` (:mod:`mocap.sui
     )
 
 
+#: the task-independent metrics of a task policy's deterministic evaluation (:mod:`mocap.task_eval`);
+#: the task's own metrics keep the task's declarations
+TASK_EVAL_METRICS: dict[str, MetricInfo] = {
+    "episodes_ended": MetricInfo("episodes ended"),
+    "terminated_share": MetricInfo("terminated episodes (share)"),
+    "envs_never_terminated": MetricInfo("envs without a fall"),
+    "episode_return": MetricInfo("episode return"),
+    "episode_length": MetricInfo("episode length", "steps"),
+}
+
+
 # ---------------------------------------------------------------------------- plugin hooks
 class NoParams(BaseModel):
     model_config = ConfigDict(extra="forbid")
@@ -115,7 +126,7 @@ def register_trainers(register):  # type: ignore[no-untyped-def]
         lazy("mocap.suite:EvalSuite"),
         params=EvalSuiteParams,
         description="imitation + random generation + the task stage's metrics of one cell, in one eval stage (comparisons)",
-        metrics=IMITATION_METRICS,
+        metrics={**IMITATION_METRICS, **TASK_EVAL_METRICS},
     )
 
 

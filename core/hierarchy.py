@@ -59,6 +59,9 @@ def register_commands(app):  # type: ignore[no-untyped-def]
         except ValueError as exc:
             raise UserError(str(exc)) from None
         print(render_task_eval(result))
+        policy = Path(result["policy"]).resolve()
+        if policy.is_relative_to(Path.cwd().resolve()):  # a committed result names no path of this machine
+            result["policy"] = str(policy.relative_to(Path.cwd().resolve()))
         if json_out is not None:
             json_out.parent.mkdir(parents=True, exist_ok=True)
             json_out.write_text(json.dumps(result, indent=2) + "\n")

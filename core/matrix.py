@@ -414,6 +414,13 @@ KEY_METRICS = (
     "eval/generation/fall_rate",
     "eval/generation/time_to_fall_s",
     "eval/generation/diversity_m",
+    # eval_suite's task part: the task policy with its deterministic action (mocap.task_eval)
+    "eval/task_eval/speed_error",
+    "eval/task_eval/heading_error",
+    "eval/task_eval/success_rate",
+    "eval/task_eval/distance",
+    "eval/task_eval/hit_rate",
+    "eval/task_eval/envs_never_terminated",
 )
 
 

@@ -50,6 +50,7 @@ def test_reproduce_spec_trains_everything_and_shares_the_imitator():
     covered |= {"imitator_amp_v13", "imitator_amp_v14"}  # _v12 and _v13 continued by continue_v12/_v13.yaml (tested below)
     covered |= {"imitator_amp_v15"}  # _v14 continued by continue_v14.yaml with PHC's fixed sigma (tested below)
     covered |= {"pulse_amp_v15", "hybrid_rvq_amp_v15"}  # the v7 latent recipes from _v15 with longer budgets (tested below)
+    covered |= {"speed_pulse_v15", "speed_scratch_v15"}  # task policies of specs/tasks/speed_*_v15.yaml (tested below)
     covered |= {"pulse_amp_v2", "pulse_amp_v4"}
     covered |= latents
     assert committed <= covered, f"committed checkpoints without a cell: {committed - covered}"
@@ -318,3 +319,24 @@ def test_imitator_v15_is_continue_v14_with_phcs_fixed_sigma():
     params = nxt.imitator.trainer.params
     assert params["learn_std"] is False and params["init_log_std"] is None
     assert Path(params["init_policy"]).resolve() == (ROOT / "checkpoints" / "imitator_amp_v15" / "policy.pt").resolve()
+
+
+@pytest.mark.parametrize("latent", ["pulse", "scratch"])
+def test_the_v15_speed_policies_were_trained_by_their_specs(latent):
+    """checkpoints/speed_<latent>_v15 embed specs/tasks/speed_<latent>_v15.yaml, run with 15M env steps
+    (its budget is 20M) and one simulator thread (the two ran side by side); PULSE's through the
+    committed pulse_amp_v15."""
+    plugins = get_plugins()
+    spec = load_spec(ROOT / "specs" / "tasks" / f"speed_{latent}_v15.yaml", plugins).spec
+    _, embedded = _checkpoint(f"speed_{latent}_v15", "task_policy.pt")
+    params = embedded["task"]["trainer"]["params"]
+    assert embedded["task"]["name"] == "speed" and params["total_env_steps"] == 15_000_000
+    expected = dict(spec.task.trainer.params)
+    assert expected.pop("total_env_steps") == 20_000_000
+    for key, value in expected.items():
+        assert params[key] == (list(value) if isinstance(value, tuple) else value), key
+    assert embedded["simulator"]["params"]["threads"] == 1 and embedded["latent"]["name"] == spec.latent.name
+    hp = embedded["humanoid"]["params"]
+    assert embedded["humanoid"]["name"] == "amp" and hp["shoulder_order"] == "xzy" and hp["shoulder_turns"] == 8.0  # the v15 humanoid
+    if latent == "pulse":
+        assert embedded["latent"]["checkpoint"] == "../pulse_amp_v15/latent.pt"
