@@ -8,10 +8,12 @@ and a list of seeds, then collects every cell's learning curve from its ``metric
         --latents scratch pulse hybrid_rvq vmp --seeds 0 --steps 500000 --out /tmp/task-compare
     python bench/task_compare.py collect --out /tmp/task-compare --json bench/results/task_compare
 
-``--suffix _v15`` trains ``specs/tasks/<task>_<latent>_v15.yaml`` instead (the latent spaces of the
-14/15-clip teacher). ``collect --task-eval 64`` also evaluates every finished cell's task policy with
-its deterministic action (``mocap task-eval``: 64 envs x ``--task-eval-seconds`` 10 s), the numbers a
-user of the policy gets, beside the training ones (which include exploration noise).
+``collect --include-unfinished`` also tabulates cells whose run was stopped (their training curves so
+far, the latent labelled with the step count; no evaluation). ``--suffix _v15`` trains
+``specs/tasks/<task>_<latent>_v15.yaml`` instead (the latent spaces of the 14/15-clip teacher).
+``collect --task-eval 64`` also evaluates every finished cell's task policy with its deterministic
+action (``mocap task-eval``: 64 envs x ``--task-eval-seconds`` 10 s), the numbers a user of the policy
+gets, beside the training ones (which include exploration noise).
 
 ``run`` is resumable: a finished cell is reused by the pipeline, an interrupted one resumes from
 its checkpoint; cells run in seed-major order, so an early stop still leaves every pairing with
@@ -128,7 +130,8 @@ def collect(args: argparse.Namespace) -> int:
         rows = _rows(cell_dir)
         if not rows:
             continue
-        if not _task_done(cell_dir):
+        finished = _task_done(cell_dir)
+        if not finished and not args.include_unfinished:
             print(f"skipped {cell_dir.name}: its task stage has not finished")
             continue
         meta_file = cell_dir / "cell.json"
@@ -139,8 +142,10 @@ def collect(args: argparse.Namespace) -> int:
             task, rest = cell_dir.name.split("_", 1)
             latent, seed_text = rest.rsplit("_s", 1)
             seed = int(seed_text)
-        cells[cell_dir.name] = {"task": task, "latent": latent, "seed": seed, **summarize(rows)}
-        if args.task_eval > 0:
+        if not finished:  # --include-unfinished: its training curve so far, labelled, never evaluated
+            latent = f"{latent} (stopped at {rows[-1]['env_steps'] / 1e6:.1f}M)"
+        cells[cell_dir.name] = {"task": task, "latent": latent, "seed": seed, "finished": finished, **summarize(rows)}
+        if args.task_eval > 0 and finished:
             from mocap.task_eval import evaluate_task
 
             print(f"{cell_dir.name}: task-eval, {args.task_eval} envs x {args.task_eval_seconds:g} s", flush=True)
@@ -269,6 +274,7 @@ def main(argv: list[str] | None = None) -> int:
     c = sub.add_parser("collect", help="gather curves and final metrics into JSON and a plot")
     c.add_argument("--out", type=Path, required=True)
     c.add_argument("--json", type=Path, default=Path("bench/results/task_compare"))
+    c.add_argument("--include-unfinished", action="store_true", help="also tabulate cells whose task stage was stopped (training curve only)")
     c.add_argument("--task-eval", type=int, default=0, help="also evaluate each cell's deterministic policy with this many envs (0: no)")
     c.add_argument("--task-eval-seconds", type=float, default=10.0, help="simulated seconds per env of --task-eval")
     args = parser.parse_args(argv)

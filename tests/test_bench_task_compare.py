@@ -82,3 +82,15 @@ def test_collect_with_task_eval_evaluates_the_deterministic_policy(tc, tmp_path)
     assert data["groups"]["speed/scratch"]["task_eval"]["speed_error"]["mean"] == pytest.approx(ev["speed_error"])
     md = out.with_suffix(".md").read_text()
     assert "Deterministic policy (`mocap task-eval`, mean action, 2 envs x 0.5 s)" in md and "| scratch | 1 |" in md
+
+
+def test_include_unfinished_labels_a_stopped_cell(tc, tmp_path):
+    cell = tmp_path / "reach_pulse_s0"
+    cell.mkdir()
+    (cell / "metrics.jsonl").write_text("\n".join(json.dumps(r) for r in _rows(10)) + "\n")  # no stages.json: stopped
+    out = tmp_path / "res"
+    assert tc.main(["collect", "--out", str(tmp_path), "--json", str(out)]) == 2  # nothing finished
+    assert tc.main(["collect", "--out", str(tmp_path), "--json", str(out), "--include-unfinished", "--task-eval", "2"]) == 0
+    data = json.loads(out.with_suffix(".json").read_text())
+    c = data["cells"]["reach_pulse_s0"]
+    assert c["latent"] == "pulse (stopped at 0.0M)" and c["finished"] is False and "task_eval" not in c

@@ -321,22 +321,31 @@ def test_imitator_v15_is_continue_v14_with_phcs_fixed_sigma():
     assert Path(params["init_policy"]).resolve() == (ROOT / "checkpoints" / "imitator_amp_v15" / "policy.pt").resolve()
 
 
-@pytest.mark.parametrize("latent", ["pulse", "scratch"])
-def test_the_v15_speed_policies_were_trained_by_their_specs(latent):
-    """checkpoints/speed_<latent>_v15 embed specs/tasks/speed_<latent>_v15.yaml, run with 15M env steps
-    (its budget is 20M) and one simulator thread (the two ran side by side); PULSE's through the
-    committed pulse_amp_v15."""
+#: committed task policies: (checkpoint, spec, env steps it ran, overrides beyond steps and threads)
+TASK_POLICIES = [
+    ("speed_pulse_v15", "speed_pulse_v15", 15_000_000, {}),
+    ("speed_scratch_v15", "speed_scratch_v15", 15_000_000, {}),
+]
+
+
+@pytest.mark.parametrize("name, spec_name, steps, overrides", TASK_POLICIES)
+def test_the_v15_task_policies_were_trained_by_their_specs(name, spec_name, steps, overrides):
+    """checkpoints/<task>_<latent>_v15 embed specs/tasks/<spec>.yaml, run with fewer env steps than its
+    20M budget, one simulator thread (two runs side by side) and the listed task params; PULSE's
+    through the committed pulse_amp_v15."""
     plugins = get_plugins()
-    spec = load_spec(ROOT / "specs" / "tasks" / f"speed_{latent}_v15.yaml", plugins).spec
-    _, embedded = _checkpoint(f"speed_{latent}_v15", "task_policy.pt")
+    spec = load_spec(ROOT / "specs" / "tasks" / f"{spec_name}.yaml", plugins).spec
+    _, embedded = _checkpoint(name, "task_policy.pt")
     params = embedded["task"]["trainer"]["params"]
-    assert embedded["task"]["name"] == "speed" and params["total_env_steps"] == 15_000_000
+    assert embedded["task"]["name"] == spec.task.name and params["total_env_steps"] == steps
     expected = dict(spec.task.trainer.params)
     assert expected.pop("total_env_steps") == 20_000_000
     for key, value in expected.items():
         assert params[key] == (list(value) if isinstance(value, tuple) else value), key
+    for key, value in overrides.items():
+        assert embedded["task"]["params"][key] == value, key
     assert embedded["simulator"]["params"]["threads"] == 1 and embedded["latent"]["name"] == spec.latent.name
     hp = embedded["humanoid"]["params"]
     assert embedded["humanoid"]["name"] == "amp" and hp["shoulder_order"] == "xzy" and hp["shoulder_turns"] == 8.0  # the v15 humanoid
-    if latent == "pulse":
+    if spec.latent.name == "pulse":
         assert embedded["latent"]["checkpoint"] == "../pulse_amp_v15/latent.pt"
