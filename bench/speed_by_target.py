@@ -5,9 +5,10 @@ clips run at about 3-4 m/s at most, so commands near 5 m/s may be out of reach o
 that moves like them. For each checkpoint or run directory of a trained speed policy
 (``mocap export`` of a task run, or the run itself) this rolls out the deterministic policy
 (:func:`mocap.task_run.open_task_run`, ``--envs`` envs x ``--seconds``, episodes restarting as in
-training) and bins every control step by its commanded speed: the mean |v* - v.d| (m/s), the mean
-speed along the target direction v.d, and the number of steps per 1 m/s bin. Steps of fallen
-humanoids count (a fall ends the episode one step later).
+training) and bins every control step by its commanded speed: the mean |v* - v.d| (m/s) with v the
+state's root velocity (the reward's default), the mean speed along the target direction v.d, and the
+number of steps per 1 m/s bin. Steps that end an episode are left out (the env then already holds
+its next start state); steps of a humanoid falling before that count.
 
 Usage: ``python bench/speed_by_target.py checkpoints/speed_pulse_v15 checkpoints/speed_scratch_v15
 --out bench/results/speed_by_target_v15`` (writes ``.json`` and ``.png``).
@@ -41,12 +42,15 @@ def by_target(path: Path, envs: int, seconds: float) -> dict:
             d = task.target_dir.clone().double()
             result = env.step(run.act(obs))
             obs = result.obs
-            v = task.root_velocity(env.sim.state).double()[:, :2]
+            # the velocity the step reached; an env whose episode ended this step already holds its
+            # next start state, so it is left out of this step's count
+            kept = ~(result.terminated.bool() | result.truncated.bool()).cpu()
+            v = env.sim.state.root_lin_vel.double().cpu()[:, :2]
             a = (v * d).sum(-1)
             idx = torch.bucketize(v_star, torch.tensor(BINS[1:-1], dtype=torch.float64), right=True)
-            err.index_add_(0, idx, (v_star - a).abs())
-            along.index_add_(0, idx, a)
-            count.index_add_(0, idx, torch.ones_like(a))
+            err.index_add_(0, idx[kept], (v_star - a).abs()[kept])
+            along.index_add_(0, idx[kept], a[kept])
+            count.index_add_(0, idx[kept], torch.ones_like(a)[kept])
     finally:
         run.close()
     c = count.clamp(min=1)

@@ -73,6 +73,8 @@ class EvalSuite(Trainer):
             result = evaluate_task_run(run, seconds=p.seconds, video=video, video_seconds=p.video_seconds)
         finally:
             run.close()
+        if video is not None and "video" not in result:
+            ctx.console.print(f"eval_suite: the {type(run.env.sim).__name__} simulator cannot render videos; no task.mp4")
         ctx.publish("task_eval.md").write_text(render_task_eval(result))
         return {k: float(v) for k, v in result.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
 

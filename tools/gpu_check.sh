@@ -2,9 +2,10 @@
 # The GPU checks of the `mujoco_warp` simulator (docs/simulators.md), for a machine with an NVIDIA GPU,
 # `pip install -e '.[warp]'` and a CUDA build of torch. Usage: bash tools/gpu_check.sh [OUT_DIR]
 # Writes into OUT_DIR (default gpu_check/): env.txt (devices, versions), tests.log (the slow
-# tests/test_sim_mujoco_warp.py on cuda: parity with `mujoco`, resets, instability, props, terrain,
-# a PPO run through `mocap run`), sim_throughput_warp_gpu.json (env steps/s of `mujoco_warp` on the
-# GPU against `mujoco` on this machine's CPU cores, and large N on the GPU alone) and ppo_gpu.log
+# tests/test_sim_mujoco_warp.py on cuda for the amp model: parity with `mujoco`, resets, instability,
+# a PPO run through `mocap run`; smpl, props and terrain compile kernels of their own and are left to
+# a longer run), sim_throughput_warp_gpu.json (amp: env steps/s of `mujoco_warp` on the GPU against
+# `mujoco` on this machine's CPU cores, and large N on the GPU alone) and ppo_gpu.log
 # (the learning loop: the PHC imitator's PPO with 4096 worlds on the GPU, state copied to the CPU).
 # Each step writes its file as it goes, so a run stopped by a time limit still leaves what it did.
 set -u
