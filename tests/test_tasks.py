@@ -294,6 +294,33 @@ def test_reach_reward_in_unit_interval_and_one_at_the_target(seed, k):
     assert (far <= r).all()  # monotone in the distance
 
 
+@SETTINGS
+@given(seed=seeds, k=st.floats(0.5, 10.0), w=st.floats(0.01, 1.0), kf=st.floats(0.05, 2.0))
+def test_reach_far_term_keeps_the_range_and_rewards_approach_from_far(seed, k, w, kf):
+    rng = np.random.default_rng(seed)
+    c = torch.as_tensor(rng.normal(0.0, 1.0, (32, 3)))
+    hand = c + torch.as_tensor(rng.normal(0.0, 2.0, (32, 3)))
+    r = reach_reward(hand, c, k, w, kf)
+    assert ((r > 0) & (r <= 1)).all()
+    assert torch.allclose(reach_reward(c, c, k, w, kf), torch.ones(32, dtype=F64))
+    d2 = ((hand - c) ** 2).sum(-1)
+    assert torch.allclose(r, (1 - w) * torch.exp(-k * d2) + w * torch.exp(-kf * d2))
+    assert torch.equal(reach_reward(hand, c, k, 0.0, kf), reach_reward(hand, c, k))  # w = 0: the paper's
+    assert (reach_reward(c + 2 * (hand - c), c, k, w, kf) <= r).all()
+    # 3 m away the paper's term is ~0; the wide term still pays for 1 m of approach
+    at = torch.tensor([[3.0, 0.0, 0.0], [2.0, 0.0, 0.0]], dtype=F64)
+    gain = reach_reward(at[1:], torch.zeros(1, 3, dtype=F64), k, w, kf) - reach_reward(at[:1], torch.zeros(1, 3, dtype=F64), k, w, kf)
+    assert gain.item() >= w * (math.exp(-4 * kf) - math.exp(-9 * kf)) * 0.999
+
+
+def test_reach_far_weight_reaches_the_task_reward(amp):
+    s = standing(1, amp.num_bodies)
+    task = make_reach(ReachParams(far_weight=0.5, far_coefficient=0.5), skeleton=amp, num_envs=1)
+    task.reset(all_ids(1), s)
+    task.target = s.body_pos[:, task.body_index] + torch.tensor([2.0, 0.0, 0.0], dtype=F64)
+    assert task.reward(s, None).item() == pytest.approx(0.5 * math.exp(-5.0 * 4) + 0.5 * math.exp(-0.5 * 4))
+
+
 def test_reach_coefficient_switch_and_hand(amp, smpl):
     assert ReachParams().coefficient == 5.0  # [P]
     task = make_reach(ReachParams(coefficient=4.0), skeleton=amp, num_envs=1)

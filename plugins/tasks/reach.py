@@ -16,7 +16,10 @@ Observation (3): ``h^-1 (c - p_root)``, the target relative to the root in the h
 
 Reward: ``r = exp(-coefficient * ||p_hand - c||^2)`` in (0, 1], 1 exactly at the target;
 ``coefficient`` 5 ([P]) or 4 ([CODE] ``pos_err_scale``). ``body`` is the reaching body (default the
-right hand: ``R_Hand`` on smpl, ``right_hand`` on amp).
+right hand: ``R_Hand`` on smpl, ``right_hand`` on amp). Switch ``far_weight`` w (ours; 0 in the
+paper and the code): ``r = (1 - w) exp(-coefficient d^2) + w exp(-far_coefficient d^2)``, still in
+(0, 1] and 1 at the target, for a policy that has strayed metres away, where ``exp(-5 d^2)`` is ~0
+and gives PPO nothing to follow (measured through PULSE: mean distance 5.4 m at 3.2M env steps).
 
 Termination: a fall (:class:`~mocap_tasks.common.FallParams`).
 
@@ -53,10 +56,21 @@ from mocap_tasks.task_params import ReachParams
 __all__ = ["ReachParams", "ReachTask", "make_reach", "reach_reward"]
 
 
-def reach_reward(hand_pos: Tensor, target: Tensor, coefficient: float = 5.0) -> Tensor:
-    """(N,) ``exp(-coefficient ||hand_pos - target||^2)``."""
+def reach_reward(
+    hand_pos: Tensor,
+    target: Tensor,
+    coefficient: float = 5.0,
+    far_weight: float = 0.0,
+    far_coefficient: float = 0.5,
+) -> Tensor:
+    """(N,) ``(1 - w) exp(-coefficient d^2) + w exp(-far_coefficient d^2)``, ``d = ||hand_pos - target||``,
+    ``w = far_weight`` (0: the paper's ``exp(-coefficient d^2)``)."""
     diff = hand_pos - target
-    return torch.exp(-coefficient * (diff * diff).sum(-1))
+    d2 = (diff * diff).sum(-1)
+    r = torch.exp(-coefficient * d2)
+    if far_weight == 0.0:
+        return r
+    return (1.0 - far_weight) * r + far_weight * torch.exp(-far_coefficient * d2)
 
 
 class ReachTask(GoalBookkeeping, TaskBase, Task):
@@ -139,9 +153,10 @@ class ReachTask(GoalBookkeeping, TaskBase, Task):
         return state.body_pos[:, self.body_index]
 
     def reward(self, state: SimState, actions: Tensor) -> Tensor:
+        p = self.params
         hand = self.hand_position(state)
         target = self.target.to(hand)
-        r = reach_reward(hand, target, self.params.coefficient)
+        r = reach_reward(hand, target, p.coefficient, p.far_weight, p.far_coefficient)
         dist = torch.linalg.vector_norm(hand - target, dim=-1)
         new = (self.reached_step < 0) & (dist.to(self.device) <= self.params.success_radius)
         self.reached_step = torch.where(new, self.goal_steps + 1, self.reached_step)

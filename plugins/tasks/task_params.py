@@ -105,6 +105,18 @@ class ReachParams(BaseModel):
         gt=0.0,
         description="r = exp(-coefficient * ||p_hand - c||^2): [P] 5 (App. C), [CODE] 4 (pos_err_scale)",
     )
+    far_weight: float = Field(
+        0.0,
+        ge=0.0,
+        le=1.0,
+        description="r = (1 - w) exp(-coefficient d^2) + w exp(-far_coefficient d^2): weight w of a wide term that "
+        "still rewards approaching a target metres away ([P] and [CODE]: 0, the narrow term only; ours)",
+    )
+    far_coefficient: float = Field(
+        0.5,
+        gt=0.0,
+        description="coefficient of the wide term (far_weight); 0.5 gives exp(-0.5) at 1 m, 0.011 at 3 m",
+    )
     xy_range: float = Field(
         1.0,
         ge=0.0,
