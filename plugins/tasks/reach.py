@@ -61,7 +61,7 @@ def reach_reward(
     target: Tensor,
     coefficient: float = 5.0,
     far_weight: float = 0.0,
-    far_coefficient: float = 0.5,
+    far_coefficient: float = 0.05,
 ) -> Tensor:
     """(N,) ``(1 - w) exp(-coefficient d^2) + w exp(-far_coefficient d^2)``, ``d = ||hand_pos - target||``,
     ``w = far_weight`` (0: the paper's ``exp(-coefficient d^2)``)."""

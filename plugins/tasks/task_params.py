@@ -113,9 +113,10 @@ class ReachParams(BaseModel):
         "still rewards approaching a target metres away ([P] and [CODE]: 0, the narrow term only; ours)",
     )
     far_coefficient: float = Field(
-        0.5,
+        0.05,
         gt=0.0,
-        description="coefficient of the wide term (far_weight); 0.5 gives exp(-0.5) at 1 m, 0.011 at 3 m",
+        description="coefficient of the wide term (far_weight): 0.05 pays 0.95 at 1 m, 0.29 at 5 m, 0.007 at 10 m "
+        "(0.5 fell to ~0 at the 5 m a PULSE reach policy strays within 1M env steps)",
     )
     xy_range: float = Field(
         1.0,
