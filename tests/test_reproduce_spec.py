@@ -350,3 +350,22 @@ def test_the_v15_task_policies_were_trained_by_their_specs(name, spec_name, step
     assert embedded["humanoid"]["name"] == "amp" and hp["shoulder_order"] == "xzy" and hp["shoulder_turns"] == 8.0  # the v15 humanoid
     if spec.latent.name == "pulse":
         assert embedded["latent"]["checkpoint"] == "../pulse_amp_v15/latent.pt"
+
+
+@pytest.mark.parametrize("task", ["speed", "reach", "strike", "point_goal"])
+def test_the_v15_task_specs_compare_the_latents_at_equal_ppo_budgets(task):
+    """<task>_{scratch,pulse,hybrid_rvq}_v15.yaml share the PPO budget and batch shape (equal steps, PULSE Fig. 4);
+    only the action head (fixed sigma for PULSE's residual, a learned one otherwise) and the latent differ."""
+    plugins = get_plugins()
+    shared = ("num_envs", "horizon", "total_env_steps", "epochs", "minibatch_size", "lr", "gamma", "gae_lambda")
+    specs = {
+        latent: load_spec(ROOT / "specs" / "tasks" / f"{task}_{latent}_v15.yaml", plugins).spec
+        for latent in ("scratch", "pulse", "hybrid_rvq")
+        if (ROOT / "specs" / "tasks" / f"{task}_{latent}_v15.yaml").exists()
+    }
+    assert {"scratch", "pulse"} <= set(specs)
+    budgets = {latent: tuple(s.task.trainer.params[k] for k in shared) for latent, s in specs.items()}
+    assert len(set(budgets.values())) == 1, budgets
+    assert {latent: s.task.name for latent, s in specs.items()} == dict.fromkeys(specs, task)
+    hp = {latent: (s.humanoid.name, s.humanoid.params) for latent, s in specs.items()}
+    assert len({(n, tuple(sorted(p.items()))) for n, p in hp.values()}) == 1, hp
