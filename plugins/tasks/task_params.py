@@ -116,7 +116,7 @@ class ReachParams(BaseModel):
         0.05,
         gt=0.0,
         description="coefficient of the wide term (far_weight): 0.05 pays 0.95 at 1 m, 0.29 at 5 m, 0.007 at 10 m "
-        "(0.5 fell to ~0 at the 5 m a PULSE reach policy strays within 1M env steps)",
+        "(0.5 fell to ~0 at the 5 m a PULSE reach policy strays within 1M env steps; [DEFAULT], no paper has the term)",
     )
     xy_range: float = Field(
         1.0,
