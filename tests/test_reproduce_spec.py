@@ -50,7 +50,7 @@ def test_reproduce_spec_trains_everything_and_shares_the_imitator():
     covered |= {"imitator_amp_v13", "imitator_amp_v14"}  # _v12 and _v13 continued by continue_v12/_v13.yaml (tested below)
     covered |= {"imitator_amp_v15"}  # _v14 continued by continue_v14.yaml with PHC's fixed sigma (tested below)
     covered |= {"pulse_amp_v15", "hybrid_rvq_amp_v15"}  # the v7 latent recipes from _v15 with longer budgets (tested below)
-    covered |= {"speed_pulse_v15", "speed_scratch_v15", "reach_scratch_v15", "reach_pulse_far_v15"}  # task policies of specs/tasks/speed_*_v15.yaml (tested below)
+    covered |= {"speed_pulse_v15", "speed_scratch_v15", "reach_scratch_v15", "reach_pulse_far_v15"}  # specs/tasks/*_v15.yaml (tested below)
     covered |= {"pulse_amp_v2", "pulse_amp_v4"}
     covered |= latents
     assert committed <= covered, f"committed checkpoints without a cell: {committed - covered}"
