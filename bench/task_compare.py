@@ -13,7 +13,8 @@ far, the latent labelled with the step count; no evaluation). ``--suffix _v15`` 
 ``specs/tasks/<task>_<latent>_v15.yaml`` instead (the latent spaces of the 14/15-clip teacher).
 ``collect --task-eval 64`` also evaluates every finished cell's task policy with its deterministic
 action (``mocap task-eval``: 64 envs x ``--task-eval-seconds`` 10 s), the numbers a user of the policy
-gets, beside the training ones (which include exploration noise).
+gets, beside the training ones (which include exploration noise); each cell keeps its evaluation in
+``task_eval_cache.json`` and a later ``collect`` reuses it while the policy file and the protocol match.
 
 ``run`` is resumable: a finished cell is reused by the pipeline, an interrupted one resumes from
 its checkpoint; cells run in seed-major order, so an early stop still leaves every pairing with
@@ -89,6 +90,35 @@ def _task_done(cell_dir: Path) -> bool:
         return False
 
 
+def _task_policy(cell_dir: Path) -> Path:
+    stages = json.loads((cell_dir / "stages.json").read_text())
+    return Path(next(s["checkpoint"] for s in stages if s.get("stage") == "task"))
+
+
+def _task_eval(cell_dir: Path, num_envs: int, seconds: float) -> dict:
+    """``mocap task-eval`` of a finished cell, kept in ``<cell>/task_eval_cache.json`` with the task policy's
+    SHA-256 and the protocol (envs, seconds): a later ``collect`` reuses it while all three match."""
+    import hashlib
+
+    policy = _task_policy(cell_dir)
+    key = {"policy_sha256": hashlib.sha256(policy.read_bytes()).hexdigest() if policy.is_file() else None, "num_envs": num_envs, "seconds": seconds}
+    cache = cell_dir / "task_eval_cache.json"
+    try:
+        cached = json.loads(cache.read_text())
+        if cached.get("key") == key:
+            print(f"{cell_dir.name}: task-eval reused from {cache.name}", flush=True)
+            return cached["metrics"]
+    except (OSError, ValueError, AttributeError):
+        pass
+    from mocap.task_eval import evaluate_task
+
+    print(f"{cell_dir.name}: task-eval, {num_envs} envs x {seconds:g} s", flush=True)
+    result = evaluate_task(cell_dir, num_envs=num_envs, seconds=seconds)
+    metrics = {k: v for k, v in result.items() if isinstance(v, (int, float)) and k != "seed"}
+    cache.write_text(json.dumps({"key": key, "metrics": metrics}, indent=1) + "\n")
+    return metrics
+
+
 def _rows(cell_dir: Path) -> list[dict]:
     path = cell_dir / "metrics.jsonl"
     if not path.is_file():
@@ -146,11 +176,7 @@ def collect(args: argparse.Namespace) -> int:
             latent = f"{latent} (stopped at {rows[-1]['env_steps'] / 1e6:.1f}M)"
         cells[cell_dir.name] = {"task": task, "latent": latent, "seed": seed, "finished": finished, **summarize(rows)}
         if args.task_eval > 0 and finished:
-            from mocap.task_eval import evaluate_task
-
-            print(f"{cell_dir.name}: task-eval, {args.task_eval} envs x {args.task_eval_seconds:g} s", flush=True)
-            result = evaluate_task(cell_dir, num_envs=args.task_eval, seconds=args.task_eval_seconds)
-            cells[cell_dir.name]["task_eval"] = {k: v for k, v in result.items() if isinstance(v, (int, float)) and k != "seed"}
+            cells[cell_dir.name]["task_eval"] = _task_eval(cell_dir, args.task_eval, args.task_eval_seconds)
     if not cells:
         print(f"error: no finished cells under {args.out}", file=sys.stderr)
         return 2

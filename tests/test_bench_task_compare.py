@@ -61,7 +61,7 @@ def test_cell_json_names_tasks_and_latents_with_underscores(tc, tmp_path):
     assert "point_goal/hybrid_rvq" in data["groups"]
 
 
-def test_collect_with_task_eval_evaluates_the_deterministic_policy(tc, tmp_path):
+def test_collect_with_task_eval_evaluates_the_deterministic_policy(tc, tmp_path, monkeypatch):
     from mocap.testing import invoke
 
     spec = tmp_path / "spec.yaml"
@@ -82,6 +82,20 @@ def test_collect_with_task_eval_evaluates_the_deterministic_policy(tc, tmp_path)
     assert data["groups"]["speed/scratch"]["task_eval"]["speed_error"]["mean"] == pytest.approx(ev["speed_error"])
     md = out.with_suffix(".md").read_text()
     assert "Deterministic policy (`mocap task-eval`, mean action, 2 envs x 0.5 s)" in md and "| scratch | 1 |" in md
+    # a second collect reuses the evaluation while the policy and the protocol match, and redoes it otherwise
+    import mocap.task_eval as te
+
+    calls, original = [], te.evaluate_task
+    monkeypatch.setattr(te, "evaluate_task", lambda *a, **k: calls.append(k) or original(*a, **k))
+    again = ["collect", "--out", str(runs), "--json", str(out), "--task-eval-seconds", "0.5", "--task-eval"]
+    assert tc.main([*again, "2"]) == 0
+    assert calls == [] and json.loads(out.with_suffix(".json").read_text())["cells"]["speed_scratch_s0"]["task_eval"] == ev
+    assert tc.main([*again, "3"]) == 0
+    assert len(calls) == 1 and json.loads(out.with_suffix(".json").read_text())["cells"]["speed_scratch_s0"]["task_eval"]["num_envs"] == 3
+    cache = cell / "task_eval_cache.json"
+    cache.write_text(cache.read_text().replace(json.loads(cache.read_text())["key"]["policy_sha256"], "0" * 64))  # another policy
+    assert tc.main([*again, "3"]) == 0
+    assert len(calls) == 2
 
 
 def test_include_unfinished_labels_a_stopped_cell(tc, tmp_path):
