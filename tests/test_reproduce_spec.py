@@ -50,7 +50,7 @@ def test_reproduce_spec_trains_everything_and_shares_the_imitator():
     covered |= {"imitator_amp_v13", "imitator_amp_v14"}  # _v12 and _v13 continued by continue_v12/_v13.yaml (tested below)
     covered |= {"imitator_amp_v15"}  # _v14 continued by continue_v14.yaml with PHC's fixed sigma (tested below)
     covered |= {"pulse_amp_v15", "hybrid_rvq_amp_v15"}  # the v7 latent recipes from _v15 with longer budgets (tested below)
-    covered |= {"speed_pulse_v15", "speed_scratch_v15", "reach_scratch_v15", "reach_pulse_far_v15"}  # specs/tasks/*_v15.yaml (tested below)
+    covered |= {name for name, *_ in TASK_POLICIES}  # task policies of specs/tasks/*_v15.yaml (tested below)
     covered |= {"pulse_amp_v2", "pulse_amp_v4"}
     covered |= latents
     assert committed <= covered, f"committed checkpoints without a cell: {committed - covered}"
@@ -327,6 +327,7 @@ TASK_POLICIES = [
     ("speed_scratch_v15", "speed_scratch_v15", 15_000_000, {}),
     ("reach_scratch_v15", "reach_scratch_v15", 12_000_000, {}),
     ("reach_pulse_far_v15", "reach_pulse_far_v15", 10_000_000, {"far_weight": 0.5, "far_coefficient": 0.05}),
+    ("speed_hybrid_rvq_v15", "speed_hybrid_rvq_v15", 8_000_000, {}),
 ]
 
 
@@ -351,6 +352,8 @@ def test_the_v15_task_policies_were_trained_by_their_specs(name, spec_name, step
     assert embedded["humanoid"]["name"] == "amp" and hp["shoulder_order"] == "xzy" and hp["shoulder_turns"] == 8.0  # the v15 humanoid
     if spec.latent.name == "pulse":
         assert embedded["latent"]["checkpoint"] == "../pulse_amp_v15/latent.pt"
+    if spec.latent.name == "hybrid_rvq":
+        assert embedded["latent"]["checkpoint"] == "../hybrid_rvq_amp_v15/latent.pt"
 
 
 @pytest.mark.parametrize("task", ["speed", "reach", "strike", "point_goal"])
