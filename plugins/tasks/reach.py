@@ -158,7 +158,7 @@ class ReachTask(GoalBookkeeping, TaskBase, Task):
         target = self.target.to(hand)
         r = reach_reward(hand, target, p.coefficient, p.far_weight, p.far_coefficient)
         dist = torch.linalg.vector_norm(hand - target, dim=-1)
-        new = (self.reached_step < 0) & (dist.to(self.device) <= self.params.success_radius)
+        new = (self.reached_step < 0) & (dist.to(self.device) <= p.success_radius)
         self.reached_step = torch.where(new, self.goal_steps + 1, self.reached_step)
         self.last_distance = dist.detach().to(self.last_distance)
         self._sums.add("distance", dist)
