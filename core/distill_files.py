@@ -45,6 +45,25 @@ def load_latent_state(path: Path, map_location: str | torch.device = "cpu") -> d
     raise CheckpointError(f"{path}: not a distilled latent-space file (format {fmt!r}, expected {LATENT_FORMAT!r} or {CHECKPOINT_FORMAT!r})")
 
 
+def init_from_latent(latent: torch.nn.Module, path: Path) -> None:
+    """Copy the weights and buffers of the latent file ``path`` (:func:`load_latent_state`) into
+    ``latent``, a fresh student of the same architecture (the distill trainer's ``init_latent``).
+    A file of another architecture raises :class:`~mocap.checkpoint.CheckpointError` naming the tensors."""
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f"{path}: init_latent does not exist")
+    state = load_latent_state(path)["state_dict"]
+    got = {k: tuple(v.shape) for k, v in state.items() if isinstance(v, Tensor)}
+    want = {k: tuple(v.shape) for k, v in latent.state_dict().items() if isinstance(v, Tensor)}
+    if got != want:
+        bad = sorted(k for k in set(got) | set(want) if got.get(k) != want.get(k))
+        raise CheckpointError(
+            f"{path}: init_latent does not fit this latent space ({len(bad)} differing tensors: "
+            f"{', '.join(bad[:3])}{', ...' if len(bad) > 3 else ''}); its sizes must match the spec's"
+        )
+    latent.load_state_dict(state)
+
+
 def check_latent_loaded(latent: torch.nn.Module, path: Path, name: str) -> None:
     """The framework's check that a latent factory handed ``path`` returned the weights in it.
 
@@ -74,4 +93,13 @@ def check_latent_loaded(latent: torch.nn.Module, path: Path, name: str) -> None:
         )
 
 
-__all__ = ["CHECKPOINT_FORMAT", "CHECKPOINT_NAME", "LATENT_FORMAT", "LATENT_NAME", "check_latent_loaded", "load_latent_state", "save_latent"]
+__all__ = [
+    "CHECKPOINT_FORMAT",
+    "CHECKPOINT_NAME",
+    "LATENT_FORMAT",
+    "LATENT_NAME",
+    "check_latent_loaded",
+    "init_from_latent",
+    "load_latent_state",
+    "save_latent",
+]

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
@@ -26,6 +27,18 @@ class DistillParams(BaseModel):
         16, ge=1, description="env columns per minibatch; each keeps its horizon steps in time order (minibatch = this × horizon samples)"
     )
     lr: LearningRate = Field(5e-4, description="Adam learning rate ([P] 5e-4)")
+    lr_end: LearningRate | None = Field(
+        None,
+        description="decay the learning rate linearly from lr at progress 0 to lr_end at progress 1 (ours: a student "
+        "whose clips swing between evaluations at a constant rate may settle at a lower one); None: lr throughout "
+        "([P] Table 4 and [CODE] keep 5e-4 constant)",
+    )
+    init_latent: Path | None = Field(
+        None,
+        description="start the student from this latent file's weights (a latent.pt or a distill.pt; relative to the spec "
+        "file; same architecture) instead of fresh ones, e.g. to continue a distillation with another schedule (ours). "
+        "Used only when the stage has no distill.pt yet; progress, the budget and the β anneal count this stage's steps",
+    )
     label: Literal["policy_output", "pd_targets"] = Field(
         "policy_output",
         description="what the student learns: the teacher's raw policy output ([P]/[CODE]: PHC's normalized absolute "
@@ -97,6 +110,15 @@ class DistillParams(BaseModel):
 
 
 # ---------------------------------------------------------------------------------- pure helpers
+def distill_lr(progress: float, lr: float, lr_end: float | None) -> float:
+    """The learning rate at ``progress`` in [0, 1]: ``lr`` when ``lr_end`` is None, else linear from
+    ``lr`` at 0 to ``lr_end`` at 1 (clamped outside)."""
+    if lr_end is None:
+        return float(lr)
+    t = min(max(float(progress), 0.0), 1.0)
+    return float(lr + (lr_end - lr) * t)
+
+
 def mixture_beta(progress: float, start: float, end: float, anneal_end: float) -> float:
     """DAgger's β (probability that the teacher acts): ``start`` at progress 0, linear to ``end`` at
     ``anneal_end``, ``end`` afterwards."""
@@ -105,4 +127,4 @@ def mixture_beta(progress: float, start: float, end: float, anneal_end: float) -
     return float(start + (end - start) * max(progress, 0.0) / anneal_end)
 
 
-__all__ = ["DistillParams", "mixture_beta"]
+__all__ = ["DistillParams", "distill_lr", "mixture_beta"]

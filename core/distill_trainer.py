@@ -80,7 +80,7 @@ from torch import Tensor
 
 from mocap import distributed as dist
 from mocap import trainer_scaffold as scaffold
-from mocap.checkpoint import save_checkpoint
+from mocap.checkpoint import CheckpointError, save_checkpoint
 from mocap.faults import FaultGuard
 from mocap.rng import rng_state
 from mocap.interfaces import DistillableLatent, Imitator, LatentSpace, Simulator, StageResult, Trainer
@@ -91,8 +91,8 @@ from mocap.latent_imitator import LatentImitator, PDTargetTeacher, observations_
 from mocap.motion.library import MotionLibrary
 from mocap.distill_episodes import DistillEpisodes
 from mocap.state import Observations
-from mocap.distill_files import CHECKPOINT_FORMAT, CHECKPOINT_NAME, LATENT_FORMAT, LATENT_NAME, load_latent_state, save_latent
-from mocap.distill_params import DistillParams, mixture_beta
+from mocap.distill_files import CHECKPOINT_FORMAT, CHECKPOINT_NAME, LATENT_FORMAT, LATENT_NAME, init_from_latent, load_latent_state, save_latent
+from mocap.distill_params import DistillParams, distill_lr, mixture_beta
 from mocap.distill_chunks import _columns, _stack_obs
 
 EPISODE_WINDOW = 100
@@ -182,6 +182,12 @@ class DistillTrainer(Trainer):
                 student.init_from_teacher(teacher)
             except ValueError as exc:  # a student/teacher mismatch the spec has to fix
                 raise DistillError(f"latent {type(student).__name__}: {exc}") from None
+            if p.init_latent is not None:  # after the teacher's statistics: the file's own normalizers win
+                try:
+                    init_from_latent(student, p.init_latent)
+                except CheckpointError as exc:
+                    raise DistillError(str(exc)) from None
+                ctx.console.print(f"distill: starting from {p.init_latent}")
             episodes.reset_all()
         self._check_dims(teacher, student, episodes, device)
 
@@ -243,6 +249,8 @@ class DistillTrainer(Trainer):
                 t_rollout = time.perf_counter() - t0
 
                 t1 = time.perf_counter()
+                for group in optimizer.param_groups:  # from progress alone, so a resumed run sets the same rate
+                    group["lr"] = distill_lr(progress, p.lr, p.lr_end)
                 stats: dict[str, float] = {}
                 # (data-parallel: a non-finite input on any rank makes every rank skip the chunk)
                 if dist.check_inputs(guard, observations=chunk.proprio, goals=chunk.goal, labels=teacher_out):

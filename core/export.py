@@ -105,8 +105,8 @@ def resolve_embedded_paths(doc: Any, base: Path) -> Any:
 
 
 def relative_spec_text(spec_yaml: str, dest: Path, *, root_map: tuple[str, str] | None = None) -> str:
-    """``spec_yaml`` with every stage's ``checkpoint:`` and its trainer's ``init_policy`` (the policy a
-    continued run started from) relative to ``dest``. ``root_map`` = ``(old prefix, new prefix)``
+    """``spec_yaml`` with every stage's ``checkpoint:`` and its trainer's ``init_policy`` or ``init_latent``
+    (the weights a continued run started from) relative to ``dest``. ``root_map`` = ``(old prefix, new prefix)``
     rewrites absolute paths of another machine (or checkout) first."""
     doc = yaml.safe_load(spec_yaml)
     if not isinstance(doc, dict):
@@ -128,8 +128,9 @@ def relative_spec_text(spec_yaml: str, dest: Path, *, root_map: tuple[str, str] 
             section["checkpoint"] = rel(ck)
         trainer = section.get("trainer")
         params = trainer.get("params") if isinstance(trainer, dict) else None
-        if isinstance(params, dict) and isinstance(params.get("init_policy"), str) and params["init_policy"]:
-            params["init_policy"] = rel(params["init_policy"])
+        for key in ("init_policy", "init_latent"):  # the weights a continued run started from
+            if isinstance(params, dict) and isinstance(params.get(key), str) and params[key]:
+                params[key] = rel(params[key])
     return yaml.safe_dump(doc, sort_keys=False)
 
 

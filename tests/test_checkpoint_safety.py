@@ -149,10 +149,11 @@ def test_committed_checkpoints_name_their_dependencies_by_relative_path():
                 # (pulse_amp_v4 was first exported from another worktree and named ../../../dist/checkpoints/...)
                 resolved = (f.parent / ck).resolve()
                 assert resolved.is_relative_to(inside) and resolved.is_file(), (f, ck)
-            init = (((doc.get(stage) or {}).get("trainer") or {}).get("params") or {}).get("init_policy")
-            if init is not None:  # a continued run names the committed policy it started from
-                resolved = (f.parent / init).resolve()
-                assert not Path(init).is_absolute() and resolved.is_relative_to(inside) and resolved.is_file(), (f, init)
+            params = ((doc.get(stage) or {}).get("trainer") or {}).get("params") or {}
+            for init in (params.get("init_policy"), params.get("init_latent")):
+                if init is not None:  # a continued run names the committed weights it started from
+                    resolved = (f.parent / init).resolve()
+                    assert not Path(init).is_absolute() and resolved.is_relative_to(inside) and resolved.is_file(), (f, init)
     target = load_evaluation_target(REPO / "checkpoints/pulse_amp_v2/latent.pt", get_plugins())
     assert Path(target.imitator_checkpoint).resolve() == (REPO / "checkpoints/imitator_amp_v2/policy.pt").resolve()
 
