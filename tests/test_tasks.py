@@ -400,7 +400,18 @@ def test_reach_metrics_on_hand_made_states(amp):
     assert m["success_rate"] == pytest.approx(0.5)
     assert m["time_to_reach"] == pytest.approx(2 / 30)
     assert m["final_distance"] == pytest.approx((0.0 + 0.5) / 2)
+    assert m["closest_distance"] == pytest.approx((0.0 + 0.5) / 2)
     assert task.metrics() == {}
+    # the closest approach of a goal that comes near and moves off again (reach.py's min_distance)
+    task.target = torch.tensor([[0.3, 0.0, 1.0], [0.0, 0.5, 1.0]], dtype=F64)
+    for x in [0.0, 0.2, 0.0]:  # env 0: 0.3, 0.1, 0.3 m; env 1: 0.5 m
+        bp = s.body_pos.clone()
+        bp[0, h] = torch.tensor([x, 0.0, 1.0], dtype=F64)
+        st_ = replace(s, body_pos=bp)
+        task.reward(st_, None)
+        task.step(st_)
+    m = task.metrics()
+    assert m["final_distance"] == pytest.approx((0.3 + 0.5) / 2) and m["closest_distance"] == pytest.approx((0.1 + 0.5) / 2)
     # a reset finishes a goal too (here unreached after one step)
     task.reward(s, None)
     task.step(s)

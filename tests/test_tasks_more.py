@@ -163,6 +163,7 @@ def test_point_goal_sampling_schedule_termination_and_metrics(amp):
     m = task.metrics()
     assert m["goals"] == 2 and m["success_rate"] == 0.5 and m["time_to_reach"] == pytest.approx(2 / 30)
     assert m["final_distance"] == pytest.approx((0.2 + 4.0) / 2) and m["steps"] == 8
+    assert m["closest_distance"] == pytest.approx((0.2 + 4.0) / 2)  # env 0 was 5.83 m away at its first step
     low = replace(state, body_pos=state.body_pos.clone())
     low.body_pos[1, task.head_index, 2] = 0.3
     assert task.terminated(low).tolist() == [False, True]

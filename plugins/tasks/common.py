@@ -8,6 +8,7 @@ yaw of the whole world about z plus a translation leaves them unchanged.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -216,8 +217,12 @@ class GoalBookkeeping:
     """Per-goal metrics shared by the goal-reaching tasks (``reach``, ``point_goal``): how many goals
     ended, the share reached, the mean time to reach and the mean final distance.
 
-    The task keeps ``goal_steps`` (steps since the goal was set), ``reached_step`` (-1 until reached)
-    and ``last_distance`` up to date and calls :meth:`_finish_goals` when goals end."""
+    The task keeps ``goal_steps`` (steps since the goal was set) and ``reached_step`` (-1 until
+    reached) up to date, reports each step's distances with :meth:`_track_distance`, calls
+    :meth:`_new_goals` when it sets goals and :meth:`_finish_goals` when goals end.
+
+    ``closest_distance``: the mean over finished goals of the smallest distance during the goal, m (a
+    success rate at one radius hides a policy that closes from 5 m to 0.3 m; this does not)."""
 
     dt: float
 
@@ -225,7 +230,20 @@ class GoalBookkeeping:
         self.goal_steps = torch.zeros(num_envs, dtype=torch.long, device=device)
         self.reached_step = torch.full((num_envs,), -1, dtype=torch.long, device=device)
         self.last_distance = torch.zeros(num_envs, dtype=torch.float64, device=device)
-        self._goal_stats = {"goals": 0.0, "reached": 0.0, "time": 0.0, "final": 0.0}
+        self.min_distance = torch.full((num_envs,), math.inf, dtype=torch.float64, device=device)
+        self._goal_stats = {"goals": 0.0, "reached": 0.0, "time": 0.0, "final": 0.0, "closest": 0.0}
+
+    def _new_goals(self, ids: Tensor) -> None:
+        """Goals ``ids`` were just set: their counters and closest distance start afresh."""
+        self.goal_steps[ids] = 0
+        self.reached_step[ids] = -1
+        self.min_distance[ids] = math.inf
+
+    def _track_distance(self, dist: Tensor) -> None:
+        """This step's distance of every env to its goal."""
+        d = dist.detach().to(self.last_distance)
+        self.last_distance = d
+        self.min_distance = torch.minimum(self.min_distance, d)
 
     def _finish_goals(self, ids: Tensor) -> None:
         ids = ids[self.goal_steps[ids] > 0]
@@ -237,6 +255,7 @@ class GoalBookkeeping:
         g["reached"] += float(reached.sum())
         g["time"] += float(self.reached_step[ids][reached].double().sum()) * self.dt
         g["final"] += float(self.last_distance[ids].sum())
+        g["closest"] += float(self.min_distance[ids].sum())
 
     def _pop_goal_metrics(self, out: dict[str, float]) -> dict[str, float]:
         """Add the goal metrics since the last call to ``out`` and reset them."""
@@ -245,6 +264,7 @@ class GoalBookkeeping:
             out["goals"] = g["goals"]
             out["success_rate"] = g["reached"] / g["goals"]
             out["final_distance"] = g["final"] / g["goals"]
+            out["closest_distance"] = g["closest"] / g["goals"]
             if g["reached"] > 0:
                 out["time_to_reach"] = g["time"] / g["reached"]
         self._goal_stats = {k: 0.0 for k in g}

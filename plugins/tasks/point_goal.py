@@ -112,8 +112,7 @@ class PointGoalTask(GoalBookkeeping, TaskBase, Task):
         r = self.params.radius * torch.sqrt(u[:, 0])  # uniform in the disc
         a = 2.0 * math.pi * u[:, 1]
         self.target[ids] = self.anchor_xy[ids] + torch.stack((r * torch.cos(a), r * torch.sin(a)), -1)
-        self.goal_steps[ids] = 0
-        self.reached_step[ids] = -1
+        self._new_goals(ids)
 
     def reset(self, env_ids: Tensor, state: SimState) -> None:
         ids = self._ids(env_ids)
@@ -159,7 +158,7 @@ class PointGoalTask(GoalBookkeeping, TaskBase, Task):
         dist = torch.linalg.vector_norm(root - target, dim=-1)
         new = (self.reached_step < 0) & (dist.to(self.device) <= p.arrive_radius)
         self.reached_step = torch.where(new, self.goal_steps + 1, self.reached_step)
-        self.last_distance = dist.detach().to(self.last_distance)
+        self._track_distance(dist)
         self._sums.add("distance", dist)
         self._sums.add("reward", r)
         self._sums.add("steps", float(r.numel()), count=1)

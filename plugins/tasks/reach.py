@@ -117,8 +117,7 @@ class ReachTask(GoalBookkeeping, TaskBase, Task):
         z = lo + (hi - lo) * u[:, 2:]
         self.target[ids] = torch.cat((xy, z), dim=-1)
         self.change_at[ids] = self.progress[ids] + self._randint(p.change_steps[0], p.change_steps[1], k)
-        self.goal_steps[ids] = 0
-        self.reached_step[ids] = -1
+        self._new_goals(ids)
 
     def reset(self, env_ids: Tensor, state: SimState) -> None:
         ids = self._ids(env_ids)
@@ -160,7 +159,7 @@ class ReachTask(GoalBookkeeping, TaskBase, Task):
         dist = torch.linalg.vector_norm(hand - target, dim=-1)
         new = (self.reached_step < 0) & (dist.to(self.device) <= p.success_radius)
         self.reached_step = torch.where(new, self.goal_steps + 1, self.reached_step)
-        self.last_distance = dist.detach().to(self.last_distance)
+        self._track_distance(dist)
         self._sums.add("distance", dist)
         self._sums.add("reward", r)
         self._sums.add("steps", float(r.numel()), count=1)
