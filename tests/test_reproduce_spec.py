@@ -37,21 +37,19 @@ def test_reproduce_spec_trains_everything_and_shares_the_imitator():
     # imitator _v2 and _v3: the same recipe trained further; vmp_amp: an earlier recipe, superseded by vmp_amp_v2;
     # vmp_amp_m: the M-conditioning ablation of the vmp cell; pulse_amp_v2: the pulse recipe with the
     # _v2 imitator as the teacher (tests below); imitator _v4: _v3 continued by specs/imitator/continue_v3.yaml;
-    # pulse_amp_v4: the pulse recipe with the _v4 imitator as the teacher (specs/latent/pulse_amp_v4.yaml, tested below);
     # imitator _v5: _v4 continued by specs/imitator/continue_v4_contacts_getup.yaml (tested below);
     # imitator _v6: _v4 continued on the x-z-y humanoid variant by specs/imitator/continue_v4_shoulders.yaml (tested below);
     # imitator _v7: _v6 continued by specs/imitator/continue_v6.yaml with 256 envs (tested below)
     covered = {"imitator_amp", "imitator_amp_v2", "imitator_amp_v3", "imitator_amp_v4", "imitator_amp_v5", "imitator_amp_v6", "vmp_amp_v2", "vmp_amp_m"}
     covered |= {"imitator_amp_v7", "pulse_amp_v7", "hybrid_rvq_amp_v7"}  # the v7 latent specs, tested below
     covered |= {"imitator_amp_v8"}  # _v7 continued by continue_v7.yaml with gamma 0.99 (tested below)
-    covered |= {"imitator_amp_v10"}  # _v8 continued by continue_v8.yaml with a loose-to-tight termination (tested below)
     covered |= {"imitator_amp_v11"}  # _v8 through the hard-clip curriculum, then continue_v8.yaml (tested below)
     covered |= {"imitator_amp_v12"}  # _v11 after two curriculum cycles (curriculum_hard_v11.yaml, continue_v11.yaml; tested below)
     covered |= {"imitator_amp_v13", "imitator_amp_v14"}  # _v12 and _v13 continued by continue_v12/_v13.yaml (tested below)
     covered |= {"imitator_amp_v15"}  # _v14 continued by continue_v14.yaml with PHC's fixed sigma (tested below)
     covered |= {"pulse_amp_v15", "hybrid_rvq_amp_v15"}  # the v7 latent recipes from _v15 with longer budgets (tested below)
     covered |= {name for name, *_ in TASK_POLICIES}  # task policies of specs/tasks/*_v15.yaml (tested below)
-    covered |= {"pulse_amp_v2", "pulse_amp_v4"}
+    covered |= {"pulse_amp_v2"}
     covered |= latents
     assert committed <= covered, f"committed checkpoints without a cell: {committed - covered}"
     keys = {name: stage_keys(r.spec) for name, r in cells.items()}
@@ -168,24 +166,6 @@ def test_imitator_v8_was_trained_by_continue_v7_with_gamma_099():
     params = follow.imitator.trainer.params
     assert (params["gamma"], params["num_envs"], params["minibatch_size"]) == (0.99, 256, 8192)
     assert Path(params["init_policy"]).resolve() == (ROOT / "checkpoints" / "imitator_amp_v8" / "policy.pt").resolve()
-
-
-def test_imitator_v10_was_trained_by_continue_v8_with_the_loose_termination():
-    """checkpoints/imitator_amp_v10 embeds continue_v8.yaml with the termination distance annealed from 1.0 m
-    over 5M env steps, from v8, at 3.01M steps; continue_v10.yaml carries on from where that schedule was."""
-    data, embedded = _checkpoint("imitator_amp_v10")
-    recipe = load_spec(ROOT / "specs" / "imitator" / "continue_v8.yaml", get_plugins()).spec
-    assert embedded["name"] == recipe.name and recipe.imitator.params.get("termination_curriculum") is None
-    assert embedded["humanoid"]["params"]["shoulder_order"] == "xzy" == recipe.humanoid.params["shoulder_order"]
-    assert embedded["imitator"]["params"]["termination_curriculum"] == {"start": 1.0, "env_steps": 5000000}
-    assert embedded["imitator"]["trainer"]["params"]["init_policy"] == "../imitator_amp_v8/policy.pt"
-    assert data["extra"]["env_steps"] == 3014656
-    follow = load_spec(ROOT / "specs" / "imitator" / "continue_v10.yaml", get_plugins()).spec
-    assert follow.humanoid == recipe.humanoid
-    reached = 1.0 + (0.5 - 1.0) * 3014656 / 5000000  # where the linear schedule was at the snapshot
-    curriculum = follow.imitator.params["termination_curriculum"]
-    assert curriculum["start"] == pytest.approx(reached, abs=0.01) and curriculum["env_steps"] == 5000000 - 3000000
-    assert Path(follow.imitator.trainer.params["init_policy"]).resolve() == (ROOT / "checkpoints" / "imitator_amp_v10" / "policy.pt").resolve()
 
 
 @pytest.mark.parametrize(("name", "getup"), [("pulse_amp_v7", False), ("pulse_amp_v7_getup", True), ("hybrid_rvq_amp_v7", True)])
