@@ -9,6 +9,8 @@ teacher's result:
         --teacher checkpoints/imitator_amp/eval.json --out bench/results/distill_curves
 
 writes ``<out>.json`` (per run: the eval points and the training action loss) and ``<out>.png``.
+``--offset`` shifts each run's env steps (one value per run): a run that continued another one's
+latent (the distill trainer's ``init_latent``) is plotted from where its source ended.
 """
 
 from __future__ import annotations
@@ -19,13 +21,18 @@ import sys
 from pathlib import Path
 
 
-def read_run(run_dir: Path) -> dict:
+def shift(steps: float | None, offset: int) -> float | None:
+    """``steps`` + ``offset`` (None stays None)."""
+    return None if steps is None else float(steps) + offset
+
+
+def read_run(run_dir: Path, offset: int = 0) -> dict:
     rows = [json.loads(line) for line in (run_dir / "metrics.jsonl").read_text().splitlines() if line.strip()]
     rows = [r for r in rows if r.get("stage") == "latent"]
     evals = [
         {
             "iteration": r["step"],
-            "env_steps": r.get("env_steps"),
+            "env_steps": shift(r.get("env_steps"), offset),
             "success_rate": r["eval/success_rate"],
             "mpjpe_g": r.get("eval/mpjpe_g"),
             "mpjpe_g_succ": r.get("eval/mpjpe_g_succ"),
@@ -33,13 +40,13 @@ def read_run(run_dir: Path) -> dict:
         for r in rows
         if "eval/success_rate" in r
     ]
-    loss = [{"env_steps": r.get("env_steps"), "action": r.get("loss/action")} for r in rows if "loss/action" in r]
+    loss = [{"env_steps": shift(r.get("env_steps"), offset), "action": r.get("loss/action")} for r in rows if "loss/action" in r]
     import yaml
 
     spec = yaml.safe_load((run_dir / "spec.yaml").read_text()) if (run_dir / "spec.yaml").is_file() else {}
     section = (spec or {}).get("latent") or {}
     latent = f"{section.get('name', '?')} ({(section.get('params') or {}).get('variant', '')})".replace(" ()", "")
-    return {"run": run_dir.name, "latent": latent, "evals": evals, "action_loss": loss[:: max(1, len(loss) // 200)]}
+    return {"run": run_dir.name, "latent": latent, "offset": offset, "evals": evals, "action_loss": loss[:: max(1, len(loss) // 200)]}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -47,8 +54,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("runs", type=Path, nargs="+", help="run directories of distillation runs")
     parser.add_argument("--teacher", type=Path, default=None, help="the teacher's `mocap eval --json` output")
     parser.add_argument("--out", type=Path, default=Path("bench/results/distill_curves"))
+    parser.add_argument("--offset", type=int, nargs="+", default=None, help="env steps added to each run's points, one per run")
     args = parser.parse_args(argv)
-    runs = [read_run(r) for r in args.runs]
+    offsets = args.offset or [0] * len(args.runs)
+    if len(offsets) != len(args.runs):
+        parser.error(f"--offset takes one value per run ({len(args.runs)}), got {len(offsets)}")
+    runs = [read_run(r, o) for r, o in zip(args.runs, offsets)]
     teacher = json.loads(args.teacher.read_text())["aggregate"] if args.teacher else None
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.with_suffix(".json").write_text(json.dumps({"teacher": teacher, "runs": runs}, indent=2) + "\n")
