@@ -1,0 +1,53 @@
+"""The continued distillations (the distill trainer's ``init_latent`` and ``lr_end``): the settle
+specs differ from the latent specs they continue only by the start, the decaying rate, the budget
+and the schedules held at their ends; the committed checkpoints embed those specs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from mocap.plugins import get_plugins
+from mocap.spec import load_spec
+from test_reproduce_spec import _checkpoint
+
+ROOT = Path(__file__).resolve().parents[1]
+LATENT = ROOT / "specs" / "latent"
+
+# spec, the spec it continues, the latent parameters it holds at the end of their schedules
+SETTLE = [
+    ("pulse_amp_v15_settle", "pulse_amp_v15", {"beta_start": 0.001, "beta_end": 0.001}),
+    ("pulse_amp_v15_beta", "pulse_amp_v15", {"beta_start": 0.0001, "beta_end": 0.0001}),
+    ("hybrid_rvq_amp_v15_settle", "hybrid_rvq_amp_v15", {"kl_weight": (0.5, 0.5), "mm_weight": (1.0, 1.0)}),
+]
+
+
+@pytest.mark.parametrize(("name", "source", "held"), SETTLE)
+def test_a_settle_spec_is_its_source_continued_with_a_decaying_rate(name, source, held):
+    plugins = get_plugins()
+    spec = load_spec(LATENT / f"{name}.yaml", plugins).spec
+    base = load_spec(LATENT / f"{source}.yaml", plugins).spec
+    params = spec.latent.trainer.params
+    family = source.split("_amp")[0]
+    assert Path(params["init_latent"]).resolve() == (ROOT / "checkpoints" / source / "latent.pt").resolve()
+    assert (params["lr"], params["lr_end"], params["total_env_steps"]) == (0.0005, 0.00005, 4_000_000)
+    assert spec.latent.name == base.latent.name and family in ("pulse", "hybrid_rvq")
+    a, b = spec.latent.model_dump(), base.latent.model_dump()
+    for key in ("init_latent", "lr_end", "total_env_steps"):
+        a["trainer"]["params"].pop(key), b["trainer"]["params"].pop(key)
+    for key, value in held.items():  # the source ended its anneal at these values
+        got = a["params"].pop(key)
+        b["params"].pop(key)
+        assert (tuple(got) if isinstance(value, tuple) else got) == value, key
+    assert a == b and spec.humanoid == base.humanoid and spec.motions == base.motions and spec.imitator == base.imitator
+
+
+def test_pulse_amp_v15_settle_embeds_its_spec_and_starts_from_pulse_amp_v15():
+    data, embedded = _checkpoint("pulse_amp_v15_settle", "latent.pt")
+    spec = load_spec(LATENT / "pulse_amp_v15_settle.yaml", get_plugins()).spec
+    assert embedded["name"] == spec.name == "pulse-amp-v15-settle"
+    trainer = embedded["latent"]["trainer"]["params"]
+    assert trainer["init_latent"] == "../pulse_amp_v15/latent.pt" and trainer["lr_end"] == 0.00005
+    assert embedded["imitator"]["checkpoint"] == "../imitator_amp_v15/policy.pt"
+    assert data["extra"]["metrics"]["env_steps"] == 4001792 and data["extra"]["metrics"]["eval/succeeded"] == 12
