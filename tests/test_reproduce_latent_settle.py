@@ -60,3 +60,14 @@ def test_speed_through_the_settled_decoder_differs_from_speed_pulse_v15_by_the_d
     assert Path(spec.latent.checkpoint).resolve() == (ROOT / "checkpoints" / "pulse_amp_v15_settle" / "latent.pt").resolve()
     assert spec.latent.model_copy(update={"checkpoint": None}) == base.latent.model_copy(update={"checkpoint": None})
     assert spec.task == base.task and spec.imitator == base.imitator and spec.humanoid == base.humanoid
+
+
+def test_pulse_amp_v15_beta_is_the_settle_continuation_with_beta_1e4():
+    data, embedded = _checkpoint("pulse_amp_v15_beta", "latent.pt")
+    _, settle = _checkpoint("pulse_amp_v15_settle", "latent.pt")
+    assert embedded["name"] == "pulse-amp-v15-beta" and embedded["latent"]["trainer"] == settle["latent"]["trainer"]
+    assert (embedded["latent"]["params"]["beta_start"], embedded["latent"]["params"]["beta_end"]) == (0.0001, 0.0001)
+    assert (settle["latent"]["params"]["beta_start"], settle["latent"]["params"]["beta_end"]) == (0.001, 0.001)
+    for doc in (embedded, settle):
+        doc["latent"]["params"].pop("beta_start"), doc["latent"]["params"].pop("beta_end"), doc.pop("name"), doc.pop("description")
+    assert embedded == settle and data["extra"]["metrics"]["env_steps"] == 4001792
