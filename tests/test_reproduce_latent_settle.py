@@ -53,11 +53,11 @@ def test_pulse_amp_v15_settle_embeds_its_spec_and_starts_from_pulse_amp_v15():
     assert data["extra"]["metrics"]["env_steps"] == 4001792 and data["extra"]["metrics"]["eval/succeeded"] == 12
 
 
-def test_speed_through_the_settled_decoder_differs_from_speed_pulse_v15_by_the_decoder_only():
+def test_speed_through_the_beta_decoder_differs_from_speed_pulse_v15_by_the_decoder_only():
     plugins = get_plugins()
-    spec = load_spec(ROOT / "specs" / "tasks" / "speed_pulse_v15_settle.yaml", plugins).spec
+    spec = load_spec(ROOT / "specs" / "tasks" / "speed_pulse_v15_beta.yaml", plugins).spec
     base = load_spec(ROOT / "specs" / "tasks" / "speed_pulse_v15.yaml", plugins).spec
-    assert Path(spec.latent.checkpoint).resolve() == (ROOT / "checkpoints" / "pulse_amp_v15_settle" / "latent.pt").resolve()
+    assert Path(spec.latent.checkpoint).resolve() == (ROOT / "checkpoints" / "pulse_amp_v15_beta" / "latent.pt").resolve()
     assert spec.latent.model_copy(update={"checkpoint": None}) == base.latent.model_copy(update={"checkpoint": None})
     assert spec.task == base.task and spec.imitator == base.imitator and spec.humanoid == base.humanoid
 
