@@ -22,6 +22,7 @@ Two result formats are read: ``bench/time_to_skill.py``'s (``points`` with ``env
         --segment v13=bench/results/imitator_ab_v12_control.json@1507328 \\
         --segment v14=bench/results/imitator_ab_v13_seed0.json@1015808 \\
         --segment v15=bench/results/imitator_ab_v14_fixed_sigma.json \\
+        --segment v16=bench/results/imitator_v16_run.json@8028160 \\
         --out bench/results/imitator_lineage
 
 ``NAME=FILE[@STEPS]``: ``@STEPS`` cuts the segment at that env-step count (the snapshot the next

@@ -46,9 +46,10 @@ def test_reproduce_spec_trains_everything_and_shares_the_imitator():
     covered |= {"imitator_amp_v11"}  # _v8 through the hard-clip curriculum, then continue_v8.yaml (tested below)
     covered |= {"imitator_amp_v12"}  # _v11 after two curriculum cycles (curriculum_hard_v11.yaml, continue_v11.yaml; tested below)
     covered |= {"imitator_amp_v13", "imitator_amp_v14"}  # _v12 and _v13 continued by continue_v12/_v13.yaml (tested below)
+    covered |= {"imitator_amp_v16"}  # _v15 continued by continue_v15.yaml (tests/test_reproduce_continued.py)
     covered |= {"imitator_amp_v15"}  # _v14 continued by continue_v14.yaml with PHC's fixed sigma (tested below)
     covered |= {"pulse_amp_v15", "hybrid_rvq_amp_v15"}  # the v7 latent recipes from _v15 with longer budgets (tested below)
-    covered |= {"pulse_amp_v15_settle", "pulse_amp_v15_beta"}  # pulse_amp_v15 continued with a decaying rate (tests/test_reproduce_latent_settle.py)
+    covered |= {"pulse_amp_v15_settle", "pulse_amp_v15_beta"}  # pulse_amp_v15 continued with a decaying rate (tests/test_reproduce_continued.py)
     covered |= {name for name, *_ in TASK_POLICIES}  # task policies of specs/tasks/*_v15.yaml (tested below)
     covered |= {"pulse_amp_v2"}
     covered |= latents

@@ -1,6 +1,7 @@
-"""The continued distillations (the distill trainer's ``init_latent`` and ``lr_end``): the settle
-specs differ from the latent specs they continue only by the start, the decaying rate, the budget
-and the schedules held at their ends; the committed checkpoints embed those specs."""
+"""Continued training runs: the continued distillations (the distill trainer's ``init_latent`` and
+``lr_end``; the settle specs differ from the latent specs they continue only by the start, the
+decaying rate, the budget and the schedules held at their ends), the task spec through one of them,
+and the imitator continued from v15; the committed checkpoints embed those specs."""
 
 from __future__ import annotations
 
@@ -71,3 +72,22 @@ def test_pulse_amp_v15_beta_is_the_settle_continuation_with_beta_1e4():
     for doc in (embedded, settle):
         doc["latent"]["params"].pop("beta_start"), doc["latent"]["params"].pop("beta_end"), doc.pop("name"), doc.pop("description")
     assert embedded == settle and data["extra"]["metrics"]["env_steps"] == 4001792
+
+
+def test_imitator_v16_is_continue_v15_and_continue_v16_carries_on():
+    """checkpoints/imitator_amp_v16: the 8.03M snapshot of continue_v15.yaml from v15 (seed 0, sigma fixed by
+    the policy it started from); continue_v16.yaml is the same recipe from v16."""
+    import torch
+
+    data, embedded = _checkpoint("imitator_amp_v16")
+    plugins = get_plugins()
+    recipe = load_spec(ROOT / "specs" / "imitator" / "continue_v15.yaml", plugins).spec
+    assert embedded["name"] == recipe.name and embedded["seed"] == 0
+    assert embedded["imitator"]["trainer"]["params"]["init_policy"] == "../imitator_amp_v15/policy.pt"
+    assert embedded["imitator"]["trainer"]["params"]["learn_std"] is False and data["extra"]["env_steps"] == 8028160
+    assert torch.allclose(data["state_dict"]["log_std"], torch.full_like(data["state_dict"]["log_std"], -2.9))
+    nxt = load_spec(ROOT / "specs" / "imitator" / "continue_v16.yaml", plugins).spec
+    assert nxt.motions == recipe.motions and nxt.humanoid == recipe.humanoid and nxt.imitator.params == recipe.imitator.params
+    a, b = nxt.imitator.trainer.params, recipe.imitator.trainer.params
+    assert Path(a["init_policy"]).resolve() == (ROOT / "checkpoints" / "imitator_amp_v16" / "policy.pt").resolve()
+    assert {k: v for k, v in a.items() if k != "init_policy"} == {k: v for k, v in b.items() if k != "init_policy"}
