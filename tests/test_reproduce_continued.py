@@ -91,3 +91,13 @@ def test_imitator_v16_is_continue_v15_and_continue_v16_carries_on():
     a, b = nxt.imitator.trainer.params, recipe.imitator.trainer.params
     assert Path(a["init_policy"]).resolve() == (ROOT / "checkpoints" / "imitator_amp_v16" / "policy.pt").resolve()
     assert {k: v for k, v in a.items() if k != "init_policy"} == {k: v for k, v in b.items() if k != "init_policy"}
+
+
+def test_hybrid_rvq_amp_v15_settle_embeds_its_spec_and_starts_from_hybrid_rvq_amp_v15():
+    data, embedded = _checkpoint("hybrid_rvq_amp_v15_settle", "latent.pt")
+    spec = load_spec(LATENT / "hybrid_rvq_amp_v15_settle.yaml", get_plugins()).spec
+    assert embedded["name"] == spec.name == "hybrid-rvq-amp-v15-settle"
+    trainer = embedded["latent"]["trainer"]["params"]
+    assert trainer["init_latent"] == "../hybrid_rvq_amp_v15/latent.pt" and trainer["lr_end"] == 0.00005
+    assert embedded["imitator"]["checkpoint"] == "../imitator_amp_v15/policy.pt"
+    assert data["extra"]["metrics"]["env_steps"] == 4001792 and data["extra"]["metrics"]["eval/total"] == 15

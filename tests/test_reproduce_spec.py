@@ -49,7 +49,11 @@ def test_reproduce_spec_trains_everything_and_shares_the_imitator():
     covered |= {"imitator_amp_v16"}  # _v15 continued by continue_v15.yaml (tests/test_reproduce_continued.py)
     covered |= {"imitator_amp_v15"}  # _v14 continued by continue_v14.yaml with PHC's fixed sigma (tested below)
     covered |= {"pulse_amp_v15", "hybrid_rvq_amp_v15"}  # the v7 latent recipes from _v15 with longer budgets (tested below)
-    covered |= {"pulse_amp_v15_settle", "pulse_amp_v15_beta"}  # pulse_amp_v15 continued with a decaying rate (tests/test_reproduce_continued.py)
+    covered |= {
+        "pulse_amp_v15_settle",
+        "pulse_amp_v15_beta",
+        "hybrid_rvq_amp_v15_settle",
+    }  # pulse_amp_v15 continued with a decaying rate (tests/test_reproduce_continued.py)
     covered |= {name for name, *_ in TASK_POLICIES}  # task policies of specs/tasks/*_v15.yaml (tested below)
     covered |= {"pulse_amp_v2"}
     covered |= latents
