@@ -44,14 +44,15 @@ def test_a_settle_spec_is_its_source_continued_with_a_decaying_rate(name, source
     assert a == b and spec.humanoid == base.humanoid and spec.motions == base.motions and spec.imitator == base.imitator
 
 
-def test_pulse_amp_v15_settle_embeds_its_spec_and_starts_from_pulse_amp_v15():
-    data, embedded = _checkpoint("pulse_amp_v15_settle", "latent.pt")
-    spec = load_spec(LATENT / "pulse_amp_v15_settle.yaml", get_plugins()).spec
-    assert embedded["name"] == spec.name == "pulse-amp-v15-settle"
+@pytest.mark.parametrize(("name", "source"), [("pulse_amp_v15_settle", "pulse_amp_v15"), ("hybrid_rvq_amp_v15_settle", "hybrid_rvq_amp_v15")])
+def test_a_settled_checkpoint_embeds_its_spec_and_starts_from_its_source(name, source):
+    data, embedded = _checkpoint(name, "latent.pt")
+    spec = load_spec(LATENT / f"{name}.yaml", get_plugins()).spec
+    assert embedded["name"] == spec.name == name.replace("_", "-")
     trainer = embedded["latent"]["trainer"]["params"]
-    assert trainer["init_latent"] == "../pulse_amp_v15/latent.pt" and trainer["lr_end"] == 0.00005
+    assert trainer["init_latent"] == f"../{source}/latent.pt" and trainer["lr_end"] == 0.00005
     assert embedded["imitator"]["checkpoint"] == "../imitator_amp_v15/policy.pt"
-    assert data["extra"]["metrics"]["env_steps"] == 4001792 and data["extra"]["metrics"]["eval/succeeded"] == 12
+    assert data["extra"]["metrics"]["env_steps"] == 4001792 and data["extra"]["metrics"]["eval/total"] == 15
 
 
 def test_speed_through_the_beta_decoder_differs_from_speed_pulse_v15_by_the_decoder_only():
@@ -91,13 +92,3 @@ def test_imitator_v16_is_continue_v15_and_continue_v16_carries_on():
     a, b = nxt.imitator.trainer.params, recipe.imitator.trainer.params
     assert Path(a["init_policy"]).resolve() == (ROOT / "checkpoints" / "imitator_amp_v16" / "policy.pt").resolve()
     assert {k: v for k, v in a.items() if k != "init_policy"} == {k: v for k, v in b.items() if k != "init_policy"}
-
-
-def test_hybrid_rvq_amp_v15_settle_embeds_its_spec_and_starts_from_hybrid_rvq_amp_v15():
-    data, embedded = _checkpoint("hybrid_rvq_amp_v15_settle", "latent.pt")
-    spec = load_spec(LATENT / "hybrid_rvq_amp_v15_settle.yaml", get_plugins()).spec
-    assert embedded["name"] == spec.name == "hybrid-rvq-amp-v15-settle"
-    trainer = embedded["latent"]["trainer"]["params"]
-    assert trainer["init_latent"] == "../hybrid_rvq_amp_v15/latent.pt" and trainer["lr_end"] == 0.00005
-    assert embedded["imitator"]["checkpoint"] == "../imitator_amp_v15/policy.pt"
-    assert data["extra"]["metrics"]["env_steps"] == 4001792 and data["extra"]["metrics"]["eval/total"] == 15
