@@ -31,6 +31,7 @@ _SHOWN: dict[str, MetricInfo] = {
     "heading_error": MetricInfo("heading error", "rad"),
     "distance": MetricInfo("distance to target", "m"),
     "final_distance": MetricInfo("final distance to target", "m"),
+    "closest_distance": MetricInfo("closest distance to target", "m"),
     "success_rate": MetricInfo("success rate"),
     "time_to_reach": MetricInfo("time to reach", "s"),
     "goals": MetricInfo("goals"),
@@ -56,7 +57,7 @@ _SHOWN: dict[str, MetricInfo] = {
     **GENERATION_METRICS,  # fall_rate, time_to_fall_s, survival_s, diversity_m: the same quantities as core's protocol
 }
 _COMMON = ("reward", "steps")
-_GOALS = ("distance", "final_distance", "success_rate", "time_to_reach", "goals")
+_GOALS = ("distance", "final_distance", "closest_distance", "success_rate", "time_to_reach", "goals")
 _REPORTED: dict[str, tuple[str, ...]] = {
     "speed": ("speed_error", "tangent_speed", "velocity_error", "heading_error"),
     "reach": _GOALS,

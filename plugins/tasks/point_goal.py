@@ -35,6 +35,7 @@ root within ``arrive_radius`` of it:
 * ``success_rate``: fraction of the finished goals (with at least one step) that were reached;
 * ``time_to_reach``: mean time from drawing to reaching over the reached finished goals, s;
 * ``final_distance``: mean distance at the last step of each finished goal, m;
+* ``closest_distance``: mean over the finished goals of the smallest distance during the goal, m;
 * ``goals``: number of finished goals (a sum). Goal metrics are absent when no goal finished.
 """
 

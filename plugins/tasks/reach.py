@@ -37,6 +37,7 @@ when it is resampled or its env is reset; it is *reached* at the first reward co
 * ``time_to_reach``: mean time from sampling to reaching over the reached finished goals, s
   (``steps * dt``; the first step counts as ``dt``);
 * ``final_distance``: mean distance at the last step of each finished goal, m;
+* ``closest_distance``: mean over the finished goals of the smallest distance during the goal, m;
 * ``goals``: number of finished goals (a sum). Goal metrics are absent when no goal finished.
 """
 
