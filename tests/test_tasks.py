@@ -433,3 +433,22 @@ def test_fall_termination(amp):
     assert task.terminated(s).tolist() == [False, True, True]
     off = make_reach(ReachParams(termination={"early_termination": False}), skeleton=amp, num_envs=3)
     assert not off.terminated(s).any()
+
+
+def test_a_goal_task_resumes_from_a_state_saved_before_closest_distance_existed(amp):
+    """Runs saved before ``min_distance`` (the closest approach per goal) was added resume with it
+    started afresh; any other missing or extra tensor is still refused."""
+    a = make_reach(ReachParams(), skeleton=amp, num_envs=3)
+    s = standing(3, amp.num_bodies)
+    a.reset(all_ids(3), s)
+    a.reward(s, None)
+    state = a.state_dict()
+    old = {"tensors": {k: v for k, v in state["tensors"].items() if k != "min_distance"}, "generator": state["generator"]}
+    b = make_reach(ReachParams(), skeleton=amp, num_envs=3)
+    b.load_state_dict(old)
+    assert torch.equal(b.target, a.target) and torch.isinf(b.min_distance).all()
+    b.load_state_dict(state)
+    assert torch.equal(b.min_distance, a.min_distance) and torch.isfinite(b.min_distance).all()
+    broken = {"tensors": {k: v for k, v in state["tensors"].items() if k != "target"}, "generator": state["generator"]}
+    with pytest.raises(ValueError, match="another task"):
+        b.load_state_dict(broken)

@@ -164,6 +164,8 @@ class TaskBase:
     def load_state_dict(self, state: dict[str, Any]) -> None:
         own = {k: v for k, v in vars(self).items() if isinstance(v, Tensor)}
         saved = state["tensors"]
+        if set(saved) <= set(own) and set(own) - set(saved) <= _ADDED_LATER:  # a run saved before they existed
+            own = {k: v for k, v in own.items() if k in saved}
         if set(saved) != set(own):
             raise ValueError(f"task state of another task: tensors {sorted(saved)} vs {sorted(own)}")
         for key, value in saved.items():
@@ -211,6 +213,10 @@ def angle_between_2d(a: Tensor, b: Tensor) -> Tensor:
     cross = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
     dot = (a * b).sum(-1)
     return torch.atan2(cross, dot).abs()
+
+
+#: per-env tensors added after runs were saved without them; a resumed run starts them afresh
+_ADDED_LATER = frozenset({"min_distance"})
 
 
 class GoalBookkeeping:
