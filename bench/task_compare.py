@@ -15,6 +15,13 @@ far, the latent labelled with the step count; no evaluation). ``--suffix _v15`` 
 action (``mocap task-eval``: 64 envs x ``--task-eval-seconds`` 10 s), the numbers a user of the policy
 gets, beside the training ones (which include exploration noise); each cell keeps its evaluation in
 ``task_eval_cache.json`` and a later ``collect`` reuses it while the policy file and the protocol match.
+``collect --task-eval-start-clips walk,run`` starts those evaluations from frames of the named clips
+(``mocap task-eval --start-clips``), e.g. to compare policies trained from different start states on
+the same ones. ``collect --at-steps N`` compares the cells at equal env steps: each curve is cut at N (a run that went
+further, e.g. an earlier seed trained longer, counts with its first N steps; its final values are the
+last 10% of iterations up to N), and only the cells whose saved policy was trained for N steps (within
+one iteration) are evaluated with ``--task-eval``; the tables name N and the deterministic table counts
+the seeds it evaluated.
 
 ``run`` is resumable: a finished cell is reused by the pipeline, an interrupted one resumes from
 its checkpoint; cells run in seed-major order, so an early stop still leaves every pairing with
@@ -95,13 +102,15 @@ def _task_policy(cell_dir: Path) -> Path:
     return Path(next(s["checkpoint"] for s in stages if s.get("stage") == "task"))
 
 
-def _task_eval(cell_dir: Path, num_envs: int, seconds: float) -> dict:
+def _task_eval(cell_dir: Path, num_envs: int, seconds: float, start_clips: list[str] | None = None) -> dict:
     """``mocap task-eval`` of a finished cell, kept in ``<cell>/task_eval_cache.json`` with the task policy's
-    SHA-256 and the protocol (envs, seconds): a later ``collect`` reuses it while all three match."""
+    SHA-256 and the protocol (envs, seconds, start clips): a later ``collect`` reuses it while all match."""
     import hashlib
 
     policy = _task_policy(cell_dir)
-    key = {"policy_sha256": hashlib.sha256(policy.read_bytes()).hexdigest() if policy.is_file() else None, "num_envs": num_envs, "seconds": seconds}
+    key: dict = {"policy_sha256": hashlib.sha256(policy.read_bytes()).hexdigest() if policy.is_file() else None, "num_envs": num_envs, "seconds": seconds}
+    if start_clips is not None:  # absent for the run's own starts, so that caches written before the option still match
+        key["start_clips"] = start_clips
     cache = cell_dir / "task_eval_cache.json"
     try:
         cached = json.loads(cache.read_text())
@@ -113,7 +122,7 @@ def _task_eval(cell_dir: Path, num_envs: int, seconds: float) -> dict:
     from mocap.task_eval import evaluate_task
 
     print(f"{cell_dir.name}: task-eval, {num_envs} envs x {seconds:g} s", flush=True)
-    result = evaluate_task(cell_dir, num_envs=num_envs, seconds=seconds)
+    result = evaluate_task(cell_dir, num_envs=num_envs, seconds=seconds, start_clips=start_clips)
     metrics = {k: v for k, v in result.items() if isinstance(v, (int, float)) and k != "seed"}
     cache.write_text(json.dumps({"key": key, "metrics": metrics}, indent=1) + "\n")
     return metrics
@@ -154,11 +163,27 @@ def summarize(rows: list[dict], bins: int = 20) -> dict:
     return {"curve": curve, "final": final, "wall_s": round(wall, 1)}
 
 
+def cut_at(rows: list[dict], steps: int | None) -> tuple[list[dict], str]:
+    """(the rows up to ``steps`` env steps, where the run's last row lies: 'at' ``steps`` within one
+    iteration (its saved policy is the policy at ``steps``), 'past' it, or 'short' of it). ``steps``
+    None: all rows, 'at'."""
+    if steps is None or not rows:
+        return rows, "at"
+    iteration = rows[1]["env_steps"] - rows[0]["env_steps"] if len(rows) > 1 else rows[0]["env_steps"]
+    last = rows[-1]["env_steps"]
+    where = "at" if abs(last - steps) <= iteration else "past" if last > steps else "short"
+    return [r for r in rows if r["env_steps"] <= steps], where
+
+
 def collect(args: argparse.Namespace) -> int:
     cells = {}
+    at_steps = args.at_steps
     for cell_dir in sorted(p for p in args.out.iterdir() if p.is_dir() and p.name != "artifacts"):
-        rows = _rows(cell_dir)
+        rows, where = cut_at(_rows(cell_dir), at_steps)
         if not rows:
+            continue
+        if where == "short":
+            print(f"skipped {cell_dir.name}: it has not reached {at_steps:,} env steps")
             continue
         finished = _task_done(cell_dir)
         if not finished and not args.include_unfinished:
@@ -175,8 +200,8 @@ def collect(args: argparse.Namespace) -> int:
         if not finished:  # --include-unfinished: its training curve so far, labelled, never evaluated
             latent = f"{latent} (stopped at {rows[-1]['env_steps'] / 1e6:.1f}M)"
         cells[cell_dir.name] = {"task": task, "latent": latent, "seed": seed, "finished": finished, **summarize(rows)}
-        if args.task_eval > 0 and finished:
-            cells[cell_dir.name]["task_eval"] = _task_eval(cell_dir, args.task_eval, args.task_eval_seconds)
+        if args.task_eval > 0 and finished and where == "at":
+            cells[cell_dir.name]["task_eval"] = _task_eval(cell_dir, args.task_eval, args.task_eval_seconds, args.task_eval_start_clips)
     if not cells:
         print(f"error: no finished cells under {args.out}", file=sys.stderr)
         return 2
@@ -190,11 +215,17 @@ def collect(args: argparse.Namespace) -> int:
     for g in groups.values():
         for part in ("final", "task_eval"):
             g[part] = {k: {"mean": sum(v) / len(v), "std": _std(v), "n": len(v)} for k, v in g[part].items()}
-    out = {"command": " ".join(["python", "bench/task_compare.py", *sys.argv[1:]]), "groups": groups, "cells": cells}
+    out = {
+        "command": " ".join(["python", "bench/task_compare.py", *sys.argv[1:]]),
+        "at_steps": at_steps,
+        "task_eval_start_clips": args.task_eval_start_clips,
+        "groups": groups,
+        "cells": cells,
+    }
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.with_suffix(".json").write_text(json.dumps(out, indent=1) + "\n")
     _plot(cells, args.json.with_suffix(".png"))
-    args.json.with_suffix(".md").write_text(render_markdown(groups))
+    args.json.with_suffix(".md").write_text(render_markdown(groups, at_steps, args.task_eval_start_clips))
     for name, g in sorted(groups.items()):
         f = g["final"]
         nr = f.get("episode/normalized_return", {})
@@ -206,9 +237,11 @@ def collect(args: argparse.Namespace) -> int:
     return 0
 
 
-def render_markdown(groups: dict) -> str:
-    """One table per task: a row per latent space, final values as mean ± std over seeds."""
-    lines = ["# Task comparison: final values (mean over the last 10% of iterations; mean ± std over seeds)", ""]
+def render_markdown(groups: dict, at_steps: int | None = None, start_clips: list[str] | None = None) -> str:
+    """One table per task: a row per latent space, final values as mean ± std over seeds (at
+    ``at_steps`` env steps when given; the deterministic evaluation from ``start_clips`` when given)."""
+    where = "" if at_steps is None else f" at {at_steps / 1e6:g}M env steps"
+    lines = [f"# Task comparison{where}: final values (mean over the last 10% of iterations; mean ± std over seeds)", ""]
     tasks = sorted({name.split("/")[0] for name in groups})
     for task in tasks:
         rows = {name.split("/")[1]: g for name, g in sorted(groups.items()) if name.split("/")[0] == task}
@@ -229,12 +262,13 @@ def render_markdown(groups: dict) -> str:
             skip = {"steps", "env_steps", "num_envs", "seconds"}
             ekeys = [k for k in any_eval if k not in skip]
             n_env, secs = int(any_eval["num_envs"]["mean"]), any_eval["seconds"]["mean"]
-            lines += [f"Deterministic policy (`mocap task-eval`, mean action, {n_env} envs x {secs:.3g} s):", ""]
+            starts = "" if start_clips is None else f", episodes start from {', '.join(start_clips)}"
+            lines += [f"Deterministic policy (`mocap task-eval`, mean action, {n_env} envs x {secs:.3g} s{starts}):", ""]
             lines += ["| latent | seeds | " + " | ".join(ekeys) + " |", "|---|---|" + "---|" * len(ekeys)]
             for latent, g in evaluated.items():
                 vals = [g["task_eval"].get(k) for k in ekeys]
                 cells = ["-" if f is None else f"{f['mean']:.3g} ± {f['std']:.2g}" if f["n"] > 1 else f"{f['mean']:.3g}" for f in vals]
-                lines.append(f"| {latent} | {len(g['seeds'])} | " + " | ".join(cells) + " |")
+                lines.append(f"| {latent} | {g['task_eval']['num_envs']['n']} | " + " | ".join(cells) + " |")
             lines.append("")
     return "\n".join(lines)
 
@@ -303,6 +337,13 @@ def main(argv: list[str] | None = None) -> int:
     c.add_argument("--include-unfinished", action="store_true", help="also tabulate cells whose task stage was stopped (training curve only)")
     c.add_argument("--task-eval", type=int, default=0, help="also evaluate each cell's deterministic policy with this many envs (0: no)")
     c.add_argument("--task-eval-seconds", type=float, default=10.0, help="simulated seconds per env of --task-eval")
+    c.add_argument(
+        "--task-eval-start-clips",
+        type=lambda text: [c.strip() for c in text.split(",") if c.strip()],
+        default=None,
+        help="comma-separated clips the --task-eval episodes start from (default: each run's motion set)",
+    )
+    c.add_argument("--at-steps", type=int, default=None, help="compare every cell at this many env steps (its curve cut there)")
     args = parser.parse_args(argv)
     return run(args) if args.command == "run" else collect(args)
 

@@ -47,6 +47,9 @@ def register_commands(app):  # type: ignore[no-untyped-def]
         seconds: Annotated[float, typer.Option("--seconds", help="simulated time per env, s")] = 10.0,
         seed: Annotated[Optional[int], typer.Option("--seed", help="start states and goals (default: the stage's seed)")] = None,
         json_out: Annotated[Optional[Path], typer.Option("--json", help="write the metrics as JSON")] = None,
+        start_clips: Annotated[
+            Optional[str], typer.Option("--start-clips", help="comma-separated clips to start episodes from (default: the run's motion set)")
+        ] = None,
     ) -> None:
         """Evaluate a trained task policy with its deterministic action: the task's metrics in units, falls, episodes."""
         import json
@@ -55,7 +58,8 @@ def register_commands(app):  # type: ignore[no-untyped-def]
         from mocap.task_eval import evaluate_task, render_task_eval
 
         try:
-            result = evaluate_task(run_dir, num_envs=envs, seconds=seconds, seed=seed)
+            clips = None if start_clips is None else [c.strip() for c in start_clips.split(",") if c.strip()]
+            result = evaluate_task(run_dir, num_envs=envs, seconds=seconds, seed=seed, start_clips=clips)
         except ValueError as exc:
             raise UserError(str(exc)) from None
         print(render_task_eval(result))

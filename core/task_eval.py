@@ -12,7 +12,12 @@ at the episode length), and reports:
   ended by termination (for every built-in task a fall, or an unstable step);
 * ``envs_never_terminated``: the share of the envs that ran the whole window without a termination;
 * ``episode_return`` / ``episode_length`` (control steps): means over the ended episodes (NaN if none);
-* ``env_steps``, ``seconds``, ``num_envs``, ``seed``.
+* ``env_steps``, ``seconds``, ``num_envs``, ``seed``, ``start_clips`` (None: the spec's motions).
+
+``start_clips`` (``mocap task-eval --start-clips walk,run``) starts every episode from frames of those
+clips instead of the run's motion set: a policy trained from every clip's frames can be measured from
+PULSE's locomotion starts (and one trained from those, from every clip's), so that two policies
+trained from different starts are compared on the same ones.
 """
 
 from __future__ import annotations
@@ -26,16 +31,19 @@ import torch
 from mocap.task_run import TaskRun, open_task_run
 
 
-def evaluate_task(run_dir: Path, *, num_envs: int = 64, seconds: float = 10.0, seed: int | None = None) -> dict[str, Any]:
+def evaluate_task(run_dir: Path, *, num_envs: int = 64, seconds: float = 10.0, seed: int | None = None, start_clips: list[str] | None = None) -> dict[str, Any]:
     """The metrics of the module docstring for the task policy of ``run_dir``."""
     if num_envs < 1 or not seconds > 0:
         raise ValueError(f"task-eval needs num_envs >= 1 and seconds > 0, got {num_envs} and {seconds}")
-    run = open_task_run(Path(run_dir), num_envs, seed)
+    if start_clips is not None and not start_clips:
+        raise ValueError("task-eval --start-clips needs at least one clip name")
+    run = open_task_run(Path(run_dir), num_envs, seed, start_clips)
     try:
         result = evaluate_task_run(run, seconds=seconds)
     finally:
         run.close()
     result["seed"] = seed
+    result["start_clips"] = start_clips
     return result
 
 
@@ -95,7 +103,7 @@ def evaluate_task_run(run: TaskRun, *, seconds: float = 10.0, video: Path | None
 
 def render_task_eval(result: dict[str, Any]) -> str:
     """A Markdown table of one :func:`evaluate_task` result."""
-    skip = {"task", "latent", "policy", "protocol", "seed", "video"}
+    skip = {"task", "latent", "policy", "protocol", "seed", "video", "start_clips"}
     rows = [f"| {k} | {v:.4g} |" if isinstance(v, float) else f"| {k} | {v} |" for k, v in result.items() if k not in skip]
     head = f"task {result['task']} through {result['latent']} ({result['protocol']})"
     return "\n".join([head, "", "| metric | value |", "|---|---|", *rows, ""])

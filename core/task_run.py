@@ -12,6 +12,7 @@ head) clipped to the action bounds as PPO clips. Used by ``mocap render RUN_DIR`
 
 from __future__ import annotations
 
+import json
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -77,8 +78,10 @@ class TaskRun:
         self.env.close()
 
 
-def open_task_run(run_dir: Path, num_envs: int = 1, seed: int | None = None) -> TaskRun:
-    """Reopen the task stage of ``run_dir`` (module docstring); errors are one :class:`UserError`."""
+def open_task_run(run_dir: Path, num_envs: int = 1, seed: int | None = None, start_clips: list[str] | None = None) -> TaskRun:
+    """Reopen the task stage of ``run_dir`` (module docstring); errors are one :class:`UserError`.
+    ``start_clips``: episodes start from frames of these clips only (``motions.params.clips`` of the
+    run's spec replaced; e.g. ``["walk", "run"]``, the locomotion starts of PULSE's speed task)."""
     from mocap.interfaces import StageResult
     from mocap.pipeline import derive_seed
     from mocap.plugins import get_plugins
@@ -92,7 +95,8 @@ def open_task_run(run_dir: Path, num_envs: int = 1, seed: int | None = None) -> 
         raise UserError(f"{run_dir}: no finished task stage in stages.json (run it first)")
     plugins = get_plugins()
     try:
-        resolved = load_spec(spec_file, plugins)  # relative checkpoint paths: to the spec file
+        overrides = None if start_clips is None else [f"motions.params.clips={json.dumps(list(start_clips))}"]
+        resolved = load_spec(spec_file, plugins, overrides)  # relative checkpoint paths: to the spec file
     except SpecError as exc:
         raise UserError(str(exc)) from None
     spec = resolved.spec

@@ -96,6 +96,10 @@ def test_collect_with_task_eval_evaluates_the_deterministic_policy(tc, tmp_path,
     cache.write_text(cache.read_text().replace(json.loads(cache.read_text())["key"]["policy_sha256"], "0" * 64))  # another policy
     assert tc.main([*again, "3"]) == 0
     assert len(calls) == 2
+    assert tc.main([*again, "3", "--task-eval-start-clips", "walk"]) == 0  # other start clips: evaluated again
+    assert len(calls) == 3 and calls[-1]["start_clips"] == ["walk"]
+    assert tc.main([*again, "3", "--task-eval-start-clips", "walk"]) == 0  # and then reused
+    assert len(calls) == 3
 
 
 def test_include_unfinished_labels_a_stopped_cell(tc, tmp_path):
@@ -108,3 +112,43 @@ def test_include_unfinished_labels_a_stopped_cell(tc, tmp_path):
     data = json.loads(out.with_suffix(".json").read_text())
     c = data["cells"]["reach_pulse_s0"]
     assert c["latent"] == "pulse (stopped at 0.0M)" and c["finished"] is False and "task_eval" not in c
+
+
+def test_cut_at_keeps_the_first_steps_and_says_where_the_run_ended(tc):
+    rows = _rows(20)  # env steps 100 .. 2000, one iteration = 100
+    kept, where = tc.cut_at(rows, 1000)
+    assert [r["env_steps"] for r in kept] == [100.0 * (i + 1) for i in range(10)] and where == "past"
+    assert tc.cut_at(rows, 2000)[1] == "at" and tc.cut_at(rows, 2050)[1] == "at"  # within one iteration
+    assert tc.cut_at(rows, 2200)[1] == "short"
+    assert tc.cut_at(rows, None) == (rows, "at")
+
+
+def test_collect_at_steps_compares_seeds_at_equal_steps(tc, tmp_path, monkeypatch):
+    # seed 0 ran 4000 steps (its curve rises on after 2000), seeds 1 and 2 ran 2000; seed 3 stopped at 1000
+    for seed, n in ((0, 40), (1, 20), (2, 20), (3, 10)):
+        cell = tmp_path / f"speed_pulse_s{seed}"
+        cell.mkdir()
+        (cell / "metrics.jsonl").write_text("\n".join(json.dumps(r) for r in _rows(n)) + "\n")
+        (cell / "stages.json").write_text(json.dumps([{"stage": "task", "checkpoint": "policy.pt"}]))
+        (cell / "cell.json").write_text(json.dumps({"task": "speed", "latent": "pulse", "seed": seed}))
+    out = tmp_path / "res"
+    assert tc.main(["collect", "--out", str(tmp_path), "--json", str(out), "--at-steps", "2000"]) == 0
+    data = json.loads(out.with_suffix(".json").read_text())
+    assert data["at_steps"] == 2000 and sorted(data["groups"]["speed/pulse"]["seeds"]) == [0, 1, 2]
+    # seed 0's final value is its rows 18, 19 of 20 kept (the last 10%), not its rows 36..39
+    s0 = data["cells"]["speed_pulse_s0"]["final"]["episode/normalized_return"]
+    assert s0 == pytest.approx((18 / 40 + 19 / 40) / 2)
+    assert data["cells"]["speed_pulse_s0"]["final"]["env_steps"] == 2000.0
+    assert "at 0.002M env steps" in out.with_suffix(".md").read_text()
+    # only the policies saved at 2000 steps are evaluated (seed 0's is the policy at 4000)
+    evaluated = []
+    monkeypatch.setattr(tc, "_task_eval", lambda cell, n, s, clips: evaluated.append((cell.name, clips)) or {"num_envs": n, "seconds": s, "speed_error": 1.0})
+    assert tc.main(["collect", "--out", str(tmp_path), "--json", str(out), "--at-steps", "2000", "--task-eval", "2"]) == 0
+    assert sorted(evaluated) == [("speed_pulse_s1", None), ("speed_pulse_s2", None)]
+    assert "| pulse | 2 |" in out.with_suffix(".md").read_text()  # the deterministic table counts the seeds it evaluated
+    evaluated.clear()
+    args = ["collect", "--out", str(tmp_path), "--json", str(out), "--at-steps", "2000", "--task-eval", "2", "--task-eval-start-clips", "walk, run"]
+    assert tc.main(args) == 0
+    assert sorted(evaluated) == [("speed_pulse_s1", ["walk", "run"]), ("speed_pulse_s2", ["walk", "run"])]
+    assert "episodes start from walk, run" in out.with_suffix(".md").read_text()
+    assert json.loads(out.with_suffix(".json").read_text())["task_eval_start_clips"] == ["walk", "run"]

@@ -106,6 +106,25 @@ def test_task_eval_errors_are_one_line(task_run: Path, tmp_path: Path):
     assert result.exit_code == 2 and "num_envs >= 1" in result.stderr
 
 
+def test_task_eval_start_clips_replace_the_runs_motion_set(task_run: Path, tmp_path: Path):
+    from mocap.task_run import open_task_run
+
+    for clips, expected in ((None, ["walk"]), (["run", "jump"], ["run", "jump"])):
+        run = open_task_run(task_run, 2, start_clips=clips)
+        try:
+            assert run.env.library.clip_names == expected
+        finally:
+            run.close()
+    out = tmp_path / "eval.json"
+    result = invoke(["task-eval", task_run, "--envs", "2", "--seconds", "0.2", "--start-clips", "run, jump", "--json", out])
+    assert result.exit_code == 0, result.output
+    assert json.loads(out.read_text())["start_clips"] == ["run", "jump"]
+    result = invoke(["task-eval", task_run, "--start-clips", "runn"])
+    assert result.exit_code == 2 and "unknown DeepMimic clip" in result.stderr and "Traceback" not in result.stderr
+    result = invoke(["task-eval", task_run, "--start-clips", " , "])
+    assert result.exit_code == 2 and "at least one clip" in result.stderr
+
+
 def test_task_stage_of_other_directories(tmp_path: Path):
     assert task_stage(tmp_path) is None
     (tmp_path / "stages.json").write_text(json.dumps([{"stage": "imitator", "checkpoint": "x.pt"}]))
