@@ -110,6 +110,7 @@ TINY: dict[str, list[str] | None] = {
     "mocap render runs/speed-scratch --out speed.mp4": ["--seconds", "0.5"],
     "mocap task-eval runs/speed-scratch --json speed_eval.json": ["--envs", "2", "--seconds", "0.5"],
     "mocap task-eval checkpoints/speed_pulse_v15": ["--envs", "2", "--seconds", "0.5"],
+    "mocap task-eval checkpoints/speed_pulse_v15 --start-clips walk,run": ["--envs", "2", "--seconds", "0.5"],
     "mocap render checkpoints/speed_pulse_v15 --out speed_pulse.mp4": ["--seconds", "0.5"],
     "mocap switches": None,
     "mocap checkpoint convert OLD.pt --trust": None,  # OLD.pt: a stand-in written by the test
