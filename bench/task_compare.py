@@ -321,6 +321,12 @@ def _plot(cells: dict, path: Path) -> None:
     fig.savefig(path, dpi=100)
 
 
+def _split_clips(text: str) -> list[str]:
+    from mocap.task_eval import split_clips
+
+    return split_clips(text)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -339,7 +345,7 @@ def main(argv: list[str] | None = None) -> int:
     c.add_argument("--task-eval-seconds", type=float, default=10.0, help="simulated seconds per env of --task-eval")
     c.add_argument(
         "--task-eval-start-clips",
-        type=lambda text: [c.strip() for c in text.split(",") if c.strip()],
+        type=_split_clips,
         default=None,
         help="comma-separated clips the --task-eval episodes start from (default: each run's motion set)",
     )

@@ -55,10 +55,10 @@ def register_commands(app):  # type: ignore[no-untyped-def]
         import json
 
         from mocap.errors import UserError
-        from mocap.task_eval import evaluate_task, render_task_eval
+        from mocap.task_eval import evaluate_task, render_task_eval, split_clips
 
         try:
-            clips = None if start_clips is None else [c.strip() for c in start_clips.split(",") if c.strip()]
+            clips = None if start_clips is None else split_clips(start_clips)
             result = evaluate_task(run_dir, num_envs=envs, seconds=seconds, seed=seed, start_clips=clips)
         except ValueError as exc:
             raise UserError(str(exc)) from None

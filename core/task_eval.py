@@ -31,6 +31,11 @@ import torch
 from mocap.task_run import TaskRun, open_task_run
 
 
+def split_clips(text: str) -> list[str]:
+    """The clip names of a comma-separated list (``"walk, run"`` -> ``["walk", "run"]``; blanks dropped)."""
+    return [c.strip() for c in text.split(",") if c.strip()]
+
+
 def evaluate_task(run_dir: Path, *, num_envs: int = 64, seconds: float = 10.0, seed: int | None = None, start_clips: list[str] | None = None) -> dict[str, Any]:
     """The metrics of the module docstring for the task policy of ``run_dir``."""
     if num_envs < 1 or not seconds > 0:
@@ -109,4 +114,4 @@ def render_task_eval(result: dict[str, Any]) -> str:
     return "\n".join([head, "", "| metric | value |", "|---|---|", *rows, ""])
 
 
-__all__ = ["evaluate_task", "evaluate_task_run", "render_task_eval"]
+__all__ = ["evaluate_task", "evaluate_task_run", "render_task_eval", "split_clips"]
