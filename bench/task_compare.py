@@ -21,7 +21,9 @@ the same ones. ``collect --at-steps N`` compares the cells at equal env steps: e
 further, e.g. an earlier seed trained longer, counts with its first N steps; its final values are the
 last 10% of iterations up to N), and only the cells whose saved policy was trained for N steps (within
 one iteration) are evaluated with ``--task-eval``; the tables name N and the deterministic table counts
-the seeds it evaluated.
+the seeds it evaluated. ``--at-steps strike=5000000`` sets one task's budget (repeat the option; a plain N is
+the budget of the other tasks). The markdown ends with a summary: each task's primary metric per latent
+space (of the deterministic policy where evaluated, else of training), and which latent space is best.
 
 ``run`` is resumable: a finished cell is reused by the pipeline, an interrupted one resumes from
 its checkpoint; cells run in seed-major order, so an early stop still leaves every pairing with
@@ -175,10 +177,41 @@ def cut_at(rows: list[dict], steps: int | None) -> tuple[list[dict], str]:
     return [r for r in rows if r["env_steps"] <= steps], where
 
 
+def parse_at_steps(values: list[str] | None) -> dict[str, int]:
+    """``--at-steps`` values to budgets: ``N`` for every task (key ``*``), ``task=N`` for one task."""
+    budgets: dict[str, int] = {}
+    for value in values or []:
+        task, _, number = value.rpartition("=")
+        try:
+            steps = int(float(number))
+        except ValueError:
+            raise ValueError(f"--at-steps {value!r}: expected N or TASK=N (an env-step count)") from None
+        if steps <= 0:
+            raise ValueError(f"--at-steps {value!r}: the env-step count must be positive")
+        budgets[task.strip() or "*"] = steps
+    return budgets
+
+
+def _cell_meta(cell_dir: Path) -> tuple[str, str, int]:
+    meta_file = cell_dir / "cell.json"
+    if meta_file.is_file():  # written by `run`; names with underscores (point_goal, hybrid_rvq) parse safely
+        meta = json.loads(meta_file.read_text())
+        return meta["task"], meta["latent"], int(meta["seed"])
+    task, rest = cell_dir.name.split("_", 1)
+    latent, seed_text = rest.rsplit("_s", 1)
+    return task, latent, int(seed_text)
+
+
 def collect(args: argparse.Namespace) -> int:
     cells = {}
-    at_steps = args.at_steps
+    try:
+        budgets = parse_at_steps(args.at_steps)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     for cell_dir in sorted(p for p in args.out.iterdir() if p.is_dir() and p.name != "artifacts"):
+        task, latent, seed = _cell_meta(cell_dir)
+        at_steps = budgets.get(task, budgets.get("*"))
         rows, where = cut_at(_rows(cell_dir), at_steps)
         if not rows:
             continue
@@ -189,14 +222,6 @@ def collect(args: argparse.Namespace) -> int:
         if not finished and not args.include_unfinished:
             print(f"skipped {cell_dir.name}: its task stage has not finished")
             continue
-        meta_file = cell_dir / "cell.json"
-        if meta_file.is_file():  # written by `run`; names with underscores (point_goal, hybrid_rvq) parse safely
-            meta = json.loads(meta_file.read_text())
-            task, latent, seed = meta["task"], meta["latent"], int(meta["seed"])
-        else:
-            task, rest = cell_dir.name.split("_", 1)
-            latent, seed_text = rest.rsplit("_s", 1)
-            seed = int(seed_text)
         if not finished:  # --include-unfinished: its training curve so far, labelled, never evaluated
             latent = f"{latent} (stopped at {rows[-1]['env_steps'] / 1e6:.1f}M)"
         cells[cell_dir.name] = {"task": task, "latent": latent, "seed": seed, "finished": finished, **summarize(rows)}
@@ -217,7 +242,8 @@ def collect(args: argparse.Namespace) -> int:
             g[part] = {k: {"mean": sum(v) / len(v), "std": _std(v), "n": len(v)} for k, v in g[part].items()}
     out = {
         "command": " ".join(["python", "bench/task_compare.py", *sys.argv[1:]]),
-        "at_steps": at_steps,
+        "at_steps": budgets.get("*"),
+        "at_steps_per_task": {k: v for k, v in budgets.items() if k != "*"},
         "task_eval_start_clips": args.task_eval_start_clips,
         "groups": groups,
         "cells": cells,
@@ -225,7 +251,7 @@ def collect(args: argparse.Namespace) -> int:
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.with_suffix(".json").write_text(json.dumps(out, indent=1) + "\n")
     _plot(cells, args.json.with_suffix(".png"))
-    args.json.with_suffix(".md").write_text(render_markdown(groups, at_steps, args.task_eval_start_clips))
+    args.json.with_suffix(".md").write_text(render_markdown(groups, budgets, args.task_eval_start_clips))
     for name, g in sorted(groups.items()):
         f = g["final"]
         nr = f.get("episode/normalized_return", {})
@@ -237,17 +263,26 @@ def collect(args: argparse.Namespace) -> int:
     return 0
 
 
-def render_markdown(groups: dict, at_steps: int | None = None, start_clips: list[str] | None = None) -> str:
-    """One table per task: a row per latent space, final values as mean ± std over seeds (at
-    ``at_steps`` env steps when given; the deterministic evaluation from ``start_clips`` when given)."""
-    where = "" if at_steps is None else f" at {at_steps / 1e6:g}M env steps"
+def _budget_text(steps: int) -> str:
+    return f"{steps / 1e6:g}M env steps"
+
+
+def render_markdown(groups: dict, budgets: dict[str, int] | None = None, start_clips: list[str] | None = None) -> str:
+    """One table per task: a row per latent space, final values as mean ± std over seeds (at the env-step
+    ``budgets`` when given: key ``*`` for every task, a task's name for its own; the deterministic
+    evaluation from ``start_clips`` when given), then the summary of each task's primary metric."""
+    budgets = budgets or {}
+    per_task = {k: v for k, v in budgets.items() if k != "*"}
+    where = f" at {_budget_text(budgets['*'])}" if "*" in budgets and not per_task else " at equal env steps per task" if per_task else ""
     lines = [f"# Task comparison{where}: final values (mean over the last 10% of iterations; mean ± std over seeds)", ""]
     tasks = sorted({name.split("/")[0] for name in groups})
     for task in tasks:
         rows = {name.split("/")[1]: g for name, g in sorted(groups.items()) if name.split("/")[0] == task}
         keys = ["episode/normalized_return", "episode/length"]
         keys += sorted({k for g in rows.values() for k in g["final"] if k.startswith("eval/") and k not in ("eval/steps",)})
-        lines += [f"## {task}", "", "| latent | seeds | " + " | ".join(k.split("/")[-1] for k in keys) + " |"]
+        budget = budgets.get(task, budgets.get("*"))
+        heading = f"## {task}" + (f" at {_budget_text(budget)}" if per_task and budget is not None else "")
+        lines += [heading, "", "| latent | seeds | " + " | ".join(k.split("/")[-1] for k in keys) + " |"]
         lines.append("|---|---|" + "---|" * len(keys))
         for latent, g in rows.items():
             cells = []
@@ -270,7 +305,47 @@ def render_markdown(groups: dict, at_steps: int | None = None, start_clips: list
                 cells = ["-" if f is None else f"{f['mean']:.3g} ± {f['std']:.2g}" if f["n"] > 1 else f"{f['mean']:.3g}" for f in vals]
                 lines.append(f"| {latent} | {g['task_eval']['num_envs']['n']} | " + " | ".join(cells) + " |")
             lines.append("")
-    return "\n".join(lines)
+    return "\n".join(lines + summary_lines(groups))
+
+
+#: primary metrics where a smaller value is better (the others: larger is better)
+LOWER_IS_BETTER = {"speed_error"}
+
+
+def summary(groups: dict) -> dict[str, dict]:
+    """Per task: its primary metric (``PRIMARY``) per latent space as {mean, std, n, source}, taken from the
+    deterministic evaluation when every latent space of the task has one, else from the training
+    episodes, and ``best``, the latent space with the best mean (None without a primary metric)."""
+    out: dict[str, dict] = {}
+    for task in sorted({name.split("/")[0] for name in groups}):
+        key = PRIMARY.get(task)
+        if key is None:
+            continue
+        rows = {name.split("/")[1]: g for name, g in groups.items() if name.split("/")[0] == task}
+        metric = key.split("/")[-1]
+        source = "deterministic" if all(metric in g.get("task_eval", {}) for g in rows.values()) else "training"
+        values = {}
+        for latent, g in sorted(rows.items()):
+            v = g["task_eval"].get(metric) if source == "deterministic" else g["final"].get(key)
+            if v is not None:
+                values[latent] = {**v, "source": source}
+        sign = -1.0 if metric in LOWER_IS_BETTER else 1.0
+        best = max(values, key=lambda latent: sign * values[latent]["mean"]) if values else None
+        out[task] = {"metric": metric, "lower_is_better": metric in LOWER_IS_BETTER, "values": values, "best": best}
+    return out
+
+
+def summary_lines(groups: dict) -> list[str]:
+    table = summary(groups)
+    if not table:
+        return []
+    lines = ["## Summary: each task's primary metric", ""]
+    lines += ["| task | metric | " + " | ".join(["latent: mean ± std (seeds, source)", "best"]) + " |", "|---|---|---|---|"]
+    for task, t in table.items():
+        better = "lower is better" if t["lower_is_better"] else "higher is better"
+        cells = "; ".join(f"{latent}: {v['mean']:.3g} ± {v['std']:.2g} ({v['n']}, {v['source']})" for latent, v in t["values"].items())
+        lines.append(f"| {task} | {t['metric']} ({better}) | {cells} | {t['best']} |")
+    return [*lines, ""]
 
 
 def _std(v: list[float]) -> float:
@@ -349,7 +424,12 @@ def main(argv: list[str] | None = None) -> int:
         default=None,
         help="comma-separated clips the --task-eval episodes start from (default: each run's motion set)",
     )
-    c.add_argument("--at-steps", type=int, default=None, help="compare every cell at this many env steps (its curve cut there)")
+    c.add_argument(
+        "--at-steps",
+        action="append",
+        default=None,
+        help="compare every cell at this many env steps (its curve cut there); TASK=N for one task's budget (repeatable)",
+    )
     args = parser.parse_args(argv)
     return run(args) if args.command == "run" else collect(args)
 

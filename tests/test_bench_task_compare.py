@@ -152,3 +152,62 @@ def test_collect_at_steps_compares_seeds_at_equal_steps(tc, tmp_path, monkeypatc
     assert sorted(evaluated) == [("speed_pulse_s1", ["walk", "run"]), ("speed_pulse_s2", ["walk", "run"])]
     assert "episodes start from walk, run" in out.with_suffix(".md").read_text()
     assert json.loads(out.with_suffix(".json").read_text())["task_eval_start_clips"] == ["walk", "run"]
+
+
+def test_parse_at_steps_reads_a_default_and_per_task_budgets(tc):
+    assert tc.parse_at_steps(None) == {}
+    assert tc.parse_at_steps(["7000000", "strike=5e6"]) == {"*": 7_000_000, "strike": 5_000_000}
+    for bad in ("strike=", "x", "speed=-3", "0"):
+        with pytest.raises(ValueError, match="--at-steps"):
+            tc.parse_at_steps([bad])
+
+
+def _cell(root, task: str, latent: str, seed: int, n: int, value: float = 0.0) -> None:
+    cell = root / f"{task}_{latent}_s{seed}"
+    cell.mkdir()
+    rows = [{**r, "eval/success_rate": value, "eval/speed_error": value} for r in _rows(n)]
+    (cell / "metrics.jsonl").write_text("\n".join(json.dumps(r) for r in rows) + "\n")
+    (cell / "stages.json").write_text(json.dumps([{"stage": "task", "checkpoint": "policy.pt"}]))
+    (cell / "cell.json").write_text(json.dumps({"task": task, "latent": latent, "seed": seed}))
+
+
+def test_collect_cuts_each_task_at_its_own_budget(tc, tmp_path, capsys):
+    _cell(tmp_path, "speed", "pulse", 0, 40)  # 4000 steps
+    _cell(tmp_path, "reach", "pulse", 0, 20)  # 2000 steps
+    out = tmp_path / "res"
+    assert tc.main(["collect", "--out", str(tmp_path), "--json", str(out), "--at-steps", "3000", "--at-steps", "reach=1000"]) == 0
+    data = json.loads(out.with_suffix(".json").read_text())
+    assert data["cells"]["speed_pulse_s0"]["final"]["env_steps"] == 3000.0
+    assert data["cells"]["reach_pulse_s0"]["final"]["env_steps"] == 1000.0
+    assert data["at_steps"] == 3000 and data["at_steps_per_task"] == {"reach": 1000}
+    md = out.with_suffix(".md").read_text()
+    assert "## reach at 0.001M env steps" in md and "## speed at 0.003M env steps" in md and "equal env steps per task" in md
+    # without reach's own budget, reach (2000 steps) is short of 3000 and left out
+    assert tc.main(["collect", "--out", str(tmp_path), "--json", str(out), "--at-steps", "3000"]) == 0
+    assert list(json.loads(out.with_suffix(".json").read_text())["cells"]) == ["speed_pulse_s0"]
+    assert "skipped reach_pulse_s0" in capsys.readouterr().out
+    assert tc.main(["collect", "--out", str(tmp_path), "--json", str(out), "--at-steps", "reach=lots"]) == 2
+    assert "error: --at-steps 'reach=lots'" in capsys.readouterr().err
+
+
+def test_summary_names_the_best_latent_per_task_in_the_metric_direction(tc, tmp_path):
+    for seed in (0, 1):
+        _cell(tmp_path, "speed", "pulse", seed, 20, value=1.0 + seed)  # speed error 1.5 on average: worse
+        _cell(tmp_path, "speed", "scratch", seed, 20, value=0.5)
+        _cell(tmp_path, "reach", "pulse", seed, 20, value=0.6)  # success 0.6: better
+        _cell(tmp_path, "reach", "scratch", seed, 20, value=0.2)
+    out = tmp_path / "res"
+    assert tc.main(["collect", "--out", str(tmp_path), "--json", str(out)]) == 0
+    data = json.loads(out.with_suffix(".json").read_text())
+    table = tc.summary(data["groups"])
+    assert table["speed"]["best"] == "scratch" and table["speed"]["lower_is_better"]
+    assert table["reach"]["best"] == "pulse" and not table["reach"]["lower_is_better"]
+    assert table["speed"]["values"]["pulse"]["mean"] == pytest.approx(1.5) and table["speed"]["values"]["pulse"]["source"] == "training"
+    # the deterministic evaluation, where every latent of a task has one, is the source
+    groups = data["groups"]
+    groups["speed/pulse"]["task_eval"] = {"speed_error": {"mean": 0.1, "std": 0.0, "n": 2}}
+    assert tc.summary(groups)["speed"]["best"] == "scratch"  # scratch has no evaluation: training values for both
+    groups["speed/scratch"]["task_eval"] = {"speed_error": {"mean": 0.9, "std": 0.0, "n": 2}}
+    assert tc.summary(groups)["speed"]["best"] == "pulse" and tc.summary(groups)["speed"]["values"]["pulse"]["source"] == "deterministic"
+    md = out.with_suffix(".md").read_text()
+    assert "| speed | speed_error (lower is better) | pulse: 1.5 ± 0.71 (2, training); scratch: 0.5 ± 0 (2, training) | scratch |" in md
