@@ -6,7 +6,9 @@ kinds on the same rollouts:
 
 * **Rollouts.** ``num_rollouts`` envs start from reference states of the motion library (clip and
   time drawn with the library's weights), skipping starts where a non-foot body origin is below
-  ``start_min_height`` (lying down is already a fall). Each control step the latent space draws an
+  ``start_min_height`` (lying down is already a fall); ``start_clips`` (``mocap generate --start-clips
+  walk,run``) draws the starts from those clips only (neither paper names its start states).
+  ``falls_by_start_clip`` breaks the falls down by the clip each rollout started in. Each control step the latent space draws an
   action from its prior with no reference motion at all: the observation is the imitator's
   proprioception only (the goal is dropped), and the latent's ``random_action(obs, noise_scale,
   generator)`` (PULSE: ``z = μ_p + noise·σ_p·ε``; hybrid: uniformly random codes [+ prior]) is
@@ -60,6 +62,9 @@ class GenerationParams(BaseModel):
     filter_threshold: float = Field(
         1.0, gt=0, description="motion matching: a transition is filtered when its squared distance per feature exceeds this ([DEFAULT]; not in the paper)"
     )
+    start_clips: Optional[list[str]] = Field(
+        None, min_length=1, description="draw the start frames from these clips only (default: every clip, with its sampling weight)"
+    )
     seed: int = Field(0, description="seed of the start states and the prior noise")
     video_rollouts: int = Field(4, ge=0, description="rollouts recorded one after another in the video (0: none)")
     video_seconds: float = Field(5.0, gt=0, description="seconds of each recorded rollout")
@@ -87,6 +92,16 @@ GENERATION_COLUMNS = (
     ("filtered", "share"),
     ("coverage", "share"),
 )
+
+
+def render_falls_by_start_clip(result: dict[str, Any]) -> str:
+    """A markdown table of one result's ``falls_by_start_clip`` (empty when it has none)."""
+    rows = result.get("falls_by_start_clip") or {}
+    if not rows:
+        return ""
+    lines = ["| start clip | rollouts | fell | down at the end |", "|---|---|---|---|"]
+    lines += [f"| {clip} | {r['rollouts']} | {r['falls']} | {r['down_at_end']} |" for clip, r in rows.items()]
+    return "\n".join(["Falls by start clip:", "", *lines, ""])
 
 
 def render_generation(results: dict[str, dict[str, Any]]) -> str:
@@ -125,6 +140,7 @@ def register_commands(app):  # type: ignore[no-untyped-def]
         seconds: Annotated[float, typer.Option("--seconds", help="length of each rollout, s")] = 10.0,
         noise: Annotated[float, typer.Option("--noise", help="prior noise scale")] = 1.0,
         seed: Annotated[int, typer.Option("--seed")] = 0,
+        start_clips: Annotated[Optional[str], typer.Option("--start-clips", help="comma-separated clips the rollouts start from (default: every clip)")] = None,
         json_out: Annotated[Optional[Path], typer.Option("--json", help="write the metrics as JSON")] = None,
         video: Annotated[Optional[Path], typer.Option("--video", help="write a video of the first rollouts (mp4 or gif)")] = None,
     ) -> None:
@@ -137,6 +153,7 @@ def register_commands(app):  # type: ignore[no-untyped-def]
         from mocap.eval_targets import build_evaluation_target, load_evaluation_target
         from mocap.generation_eval import generate_from_target
         from mocap.plugins import get_plugins
+        from mocap.task_eval import split_clips
 
         console = Console(stderr=True)
         plugins = get_plugins()
@@ -144,13 +161,17 @@ def register_commands(app):  # type: ignore[no-untyped-def]
         if target_info.latent_checkpoint is None:
             raise UserError(f"{target}: not a latent space (generation samples a latent space's prior)")
         loaded = build_evaluation_target(target_info, plugins)
-        params = GenerationParams(num_rollouts=rollouts, seconds=seconds, noise_scale=noise, seed=seed)
+        clips = None if start_clips is None else split_clips(start_clips)
+        if clips is not None and not clips:
+            raise UserError("--start-clips needs at least one clip name")
+        params = GenerationParams(num_rollouts=rollouts, seconds=seconds, noise_scale=noise, seed=seed, start_clips=clips)
         try:
             result = generate_from_target(loaded, params, video=video, console=console)
         except ValueError as exc:
             raise UserError(str(exc)) from None
         result["checkpoint"] = str(target_info.latent_checkpoint)
         print(render_generation({target_info.spec.latent.name: result}))
+        print(render_falls_by_start_clip(result))
         if json_out is not None:
             json_out.parent.mkdir(parents=True, exist_ok=True)
             json_out.write_text(json.dumps(result, indent=2) + "\n")

@@ -12,7 +12,7 @@ from typing import Any, Callable
 import torch
 from torch import Tensor
 
-from mocap.generation import GenerationParams, render_generation
+from mocap.generation import GenerationParams, render_falls_by_start_clip, render_generation
 from mocap.interfaces import Imitator, Simulator, Trainer
 from mocap.motion.library import MotionLibrary
 from mocap.observations import SixD, proprioception
@@ -98,13 +98,34 @@ def dataset_transitions(lib: MotionLibrary, dt: float, sixd: SixD = "zhou") -> T
     return torch.cat(rows)
 
 
-def start_states(lib: MotionLibrary, n: int, skeleton: Any, min_height: float, generator: torch.Generator) -> tuple[Tensor, Tensor]:
-    """``n`` (clip id, time) pairs drawn with the library's weights whose frames have every non-foot body above ``min_height``."""
+def start_states(
+    lib: MotionLibrary, n: int, skeleton: Any, min_height: float, generator: torch.Generator, clips: list[str] | None = None
+) -> tuple[Tensor, Tensor]:
+    """``n`` (clip id, time) pairs drawn with the library's weights whose frames have every non-foot body above
+    ``min_height``; with ``clips``, only frames of those clips (their weights renormalized; the library, and so
+    the motion-matching dataset, stays whole). ``ValueError`` for an empty list or an unknown clip name."""
     allowed = allowed_contact_mask(skeleton).cpu()
+    weights = None
+    if clips is not None:
+        if not clips:
+            raise ValueError("generation start clips: need at least one clip name")
+        try:
+            chosen = torch.tensor([lib.clip_index(c) for c in clips])
+        except KeyError as exc:
+            raise ValueError(str(exc.args[0])) from None
+        weights = torch.zeros(lib.num_clips, dtype=torch.float64)
+        weights[chosen] = lib.weights.double().cpu()[chosen]
+        if not float(weights.sum()) > 0:  # clips named on purpose that the motion set weights 0: equally
+            weights[chosen] = 1.0
     ids_out, t_out = [], []
     have = 0
     for _ in range(100):
-        ids, times = lib.sample(4 * n, generator=generator)
+        if weights is None:
+            ids, times = lib.sample(4 * n, generator=generator)
+        else:
+            ids = torch.multinomial(weights, 4 * n, replacement=True, generator=generator)
+            times = torch.rand(4 * n, generator=generator, dtype=torch.float64) * lib.durations64.cpu()[ids]
+            ids, times = ids.to(lib.device), times.to(lib.device, lib.dtype)
         frames = lib.frames(ids, times)
         low = (frames.body_pos[..., 2].cpu() < min_height) & ~allowed
         ok = ~low.any(-1)
@@ -116,6 +137,17 @@ def start_states(lib: MotionLibrary, n: int, skeleton: Any, min_height: float, g
     if have < n:
         raise ValueError(f"fewer than {n} start frames with every non-foot body above {min_height} m in the motion library")
     return torch.cat(ids_out)[:n], torch.cat(t_out)[:n]
+
+
+def falls_by_start_clip(clips: list[str], fell: list[bool], down_at_end: list[bool]) -> dict[str, dict[str, int]]:
+    """Per start clip (sorted by name): its rollouts, how many fell and how many were down at the end."""
+    out: dict[str, dict[str, int]] = {}
+    for clip, f, d in zip(clips, fell, down_at_end, strict=True):
+        row = out.setdefault(clip, {"rollouts": 0, "falls": 0, "down_at_end": 0})
+        row["rollouts"] += 1
+        row["falls"] += int(f)
+        row["down_at_end"] += int(d)
+    return dict(sorted(out.items()))
 
 
 def _reference_free(obs: Observations) -> Observations:
@@ -145,7 +177,7 @@ def evaluate_generation(
     gen = torch.Generator().manual_seed(p.seed)
     sim = make_sim(p.num_rollouts)
     skeleton = sim.skeleton
-    ids, times = start_states(lib, p.num_rollouts, skeleton, p.start_min_height, gen)
+    ids, times = start_states(lib, p.num_rollouts, skeleton, p.start_min_height, gen, p.start_clips)
     ref = lib.frames(ids, times)
     sim.reset(torch.arange(p.num_rollouts), ref)
     state = sim.state
@@ -208,8 +240,9 @@ def evaluate_generation(
     prop = torch.stack(props)  # (T + 1, N, P)
     gen_trans = torch.cat([prop[:-1], prop[1:]], -1).reshape(-1, 2 * prop.shape[-1])
     matching = motion_matching(gen_trans, dataset_transitions(lib, dt, sixd), p.filter_threshold)
+    starts = "library start states" if p.start_clips is None else f"start states of {', '.join(p.start_clips)}"
     result: dict[str, Any] = {
-        "protocol": "mocap-generation-v1 (prior rollouts from library start states; see mocap.generation)",
+        "protocol": f"mocap-generation-v1 (prior rollouts from {starts}; see mocap.generation)",
         "params": p.model_dump(),
         "num_rollouts": p.num_rollouts,
         "seconds": horizon,
@@ -222,6 +255,7 @@ def evaluate_generation(
         **matching,
         "start_clips": [lib.clip_names[int(i)] for i in ids],
         "fall_time_s_per_rollout": [float(f) * dt if f >= 0 else None for f in first_fall.tolist()],
+        "falls_by_start_clip": falls_by_start_clip([lib.clip_names[int(i)] for i in ids], fell.tolist(), down.tolist()),
     }
     if recorder is not None:
         for frames in frames_by_env:
@@ -280,7 +314,7 @@ class GenerationEval(Trainer):
         except ValueError as exc:
             raise StageFailed(f"generation_eval: {exc}") from None
         atomic_write_json(ctx.publish("generation.json"), result)
-        atomic_write_text(ctx.publish("generation.md"), render_generation({ctx.spec.latent.name: result}))
+        atomic_write_text(ctx.publish("generation.md"), render_generation({ctx.spec.latent.name: result}) + "\n" + render_falls_by_start_clip(result))
         numeric = {k: float(v) for k, v in result.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
         ctx.log.log(0, **numeric)
         return StageResult(checkpoint=None, metrics=numeric)
@@ -290,6 +324,7 @@ __all__ = [
     "GenerationEval",
     "dataset_transitions",
     "evaluate_generation",
+    "falls_by_start_clip",
     "generate_from_target",
     "fallen_down",
     "heading_frame",

@@ -131,6 +131,48 @@ def test_generation_stage_and_command(pulse_run, tmp_path):
     assert json.loads(out.read_text())["num_rollouts"] == 2 and "fall_rate" in result.stdout
 
 
+def test_falls_by_start_clip_counts_per_clip():
+    from mocap.generation_eval import falls_by_start_clip
+
+    rows = falls_by_start_clip(["walk", "kick", "walk", "walk"], [True, True, False, False], [False, True, False, True])
+    assert list(rows) == ["kick", "walk"]
+    assert rows["walk"] == {"rollouts": 3, "falls": 1, "down_at_end": 1} and rows["kick"] == {"rollouts": 1, "falls": 1, "down_at_end": 1}
+    with pytest.raises(ValueError):
+        falls_by_start_clip(["walk"], [True, False], [False])
+
+
+def test_start_states_only_from_the_named_clips(amp):
+    from mocap.generation_eval import start_states
+    from mocap.motion.library import MotionLibrary
+    from mocap.motion.deepmimic import DeepMimicParams, DeepMimicSource
+
+    lib = MotionLibrary(DeepMimicSource(DeepMimicParams(clips=["walk", "run", "kick"])).load(amp), amp)
+    ids, times = start_states(lib, 40, amp, 0.25, torch.Generator().manual_seed(0), ["kick", "run"])
+    names = {lib.clip_names[int(i)] for i in ids}
+    assert names <= {"kick", "run"} and len(ids) == 40
+    assert bool((times >= 0).all()) and bool((times <= lib.durations[ids] + 1e-6).all())
+    everywhere, _ = start_states(lib, 200, amp, 0.25, torch.Generator().manual_seed(0))
+    assert "walk" in {lib.clip_names[int(i)] for i in everywhere}  # without the option every clip starts rollouts
+    with pytest.raises(ValueError, match="no clip 'wlak'.*walk"):
+        start_states(lib, 4, amp, 0.25, torch.Generator().manual_seed(0), ["wlak"])
+    with pytest.raises(ValueError, match="at least one clip"):
+        start_states(lib, 4, amp, 0.25, torch.Generator().manual_seed(0), [])
+
+
+def test_generate_start_clips_and_the_per_clip_table(pulse_run, tmp_path):
+    out = tmp_path / "g.json"
+    result = invoke(["generate", pulse_run, "--rollouts", "2", "--seconds", "0.2", "--start-clips", "walk", "--json", out])
+    assert result.exit_code == 0, result.output
+    table = json.loads(out.read_text())
+    assert table["start_clips"] == ["walk", "walk"] and table["params"]["start_clips"] == ["walk"]
+    assert table["falls_by_start_clip"]["walk"]["rollouts"] == 2 and "start states of walk" in table["protocol"]
+    assert "| start clip | rollouts | fell | down at the end |" in result.stdout and "| walk | 2 |" in result.stdout
+    bad = invoke(["generate", pulse_run, "--rollouts", "2", "--seconds", "0.2", "--start-clips", "kick"])
+    assert bad.exit_code == 2 and "Traceback" not in bad.output and "no clip 'kick'" in bad.stderr
+    empty = invoke(["generate", pulse_run, "--rollouts", "2", "--start-clips", " , "])
+    assert empty.exit_code == 2 and "at least one clip name" in empty.stderr
+
+
 def test_eval_of_a_latent_run_compares_it_with_its_teacher(pulse_run, tmp_path):
     out = tmp_path / "e.json"
     result = invoke(["eval", pulse_run, "--json", out])
