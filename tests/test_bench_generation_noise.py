@@ -39,3 +39,27 @@ def test_split_by_start_clip_adds_up(gn, rollouts):
 def test_split_known_case(gn):
     split = gn.by_start_clip(["walk", "walk", "roll"], [None, 2.0, 1.0])
     assert split == {"roll": {"rollouts": 1, "fall_rate": 1.0, "time_to_fall_s": 1.0}, "walk": {"rollouts": 2, "fall_rate": 0.5, "time_to_fall_s": 2.0}}
+
+
+@given(st.lists(st.tuples(st.sampled_from(["walk", "run", "kick"]), st.booleans(), st.booleans()), min_size=1, max_size=40))
+@settings(max_examples=60, deadline=None)
+def test_core_falls_by_start_clip_adds_up_and_agrees_with_the_bench_split(gn, rollouts):
+    from mocap.generation_eval import falls_by_start_clip
+
+    clips, fell, down = ([r[i] for r in rollouts] for i in range(3))
+    rows = falls_by_start_clip(clips, fell, down)
+    assert sum(r["rollouts"] for r in rows.values()) == len(rollouts)
+    assert sum(r["falls"] for r in rows.values()) == sum(fell) and sum(r["down_at_end"] for r in rows.values()) == sum(down)
+    split = gn.by_start_clip(clips, [1.0 if f else None for f in fell])
+    assert {c: (r["rollouts"], r["falls"]) for c, r in rows.items()} == {c: (v["rollouts"], round(v["fall_rate"] * v["rollouts"])) for c, v in split.items()}
+
+
+def test_render_markdown_names_the_start_sets_and_the_per_clip_falls(gn):
+    record = {
+        "checkpoint": "checkpoints/pulse_x", "starts": "walk,run", "noise_scale": 1.0, "num_rollouts": 3, "seconds": 10.0,
+        "fall_rate": 1 / 3, "down_at_end": 0.0, "survival_s": 9.0, "diversity_m": 2.5, "coverage": 0.1,
+        "falls_by_start_clip": {"run": {"rollouts": 1, "falls": 1, "down_at_end": 0}, "walk": {"rollouts": 2, "falls": 0, "down_at_end": 0}},
+    }  # fmt: skip
+    md = gn.render_markdown([record])
+    assert "| pulse_x | walk,run | 1 | 0.333 | 0.000 | 9.00 | 2.50 | 0.100 |" in md
+    assert "- pulse_x, starts walk,run, noise 1: run 1/1 (0), walk 0/2 (0)" in md
