@@ -120,12 +120,7 @@ def start_states(
     ids_out, t_out = [], []
     have = 0
     for _ in range(100):
-        if weights is None:
-            ids, times = lib.sample(4 * n, generator=generator)
-        else:
-            ids = torch.multinomial(weights, 4 * n, replacement=True, generator=generator)
-            times = torch.rand(4 * n, generator=generator, dtype=torch.float64) * lib.durations64.cpu()[ids]
-            ids, times = ids.to(lib.device), times.to(lib.device, lib.dtype)
+        ids, times = lib.sample(4 * n, generator=generator, weights=weights)
         frames = lib.frames(ids, times)
         low = (frames.body_pos[..., 2].cpu() < min_height) & ~allowed
         ok = ~low.any(-1)
@@ -241,6 +236,7 @@ def evaluate_generation(
     gen_trans = torch.cat([prop[:-1], prop[1:]], -1).reshape(-1, 2 * prop.shape[-1])
     matching = motion_matching(gen_trans, dataset_transitions(lib, dt, sixd), p.filter_threshold)
     starts = "library start states" if p.start_clips is None else f"start states of {', '.join(p.start_clips)}"
+    start_names = [lib.clip_names[int(i)] for i in ids]
     result: dict[str, Any] = {
         "protocol": f"mocap-generation-v1 (prior rollouts from {starts}; see mocap.generation)",
         "params": p.model_dump(),
@@ -253,9 +249,9 @@ def evaluate_generation(
         "unstable": int(unstable.sum()),
         "diversity_m": pairwise_diversity(traj),
         **matching,
-        "start_clips": [lib.clip_names[int(i)] for i in ids],
+        "start_clips": start_names,
         "fall_time_s_per_rollout": [float(f) * dt if f >= 0 else None for f in first_fall.tolist()],
-        "falls_by_start_clip": falls_by_start_clip([lib.clip_names[int(i)] for i in ids], fell.tolist(), down.tolist()),
+        "falls_by_start_clip": falls_by_start_clip(start_names, fell.tolist(), down.tolist()),
     }
     if recorder is not None:
         for frames in frames_by_env:

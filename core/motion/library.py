@@ -379,10 +379,10 @@ class MotionLibrary:
                 raise ValueError("clip weights must be finite, non-negative and not all zero")
         self._weights = (w / w.sum()).to(self.device)
 
-    def sample(self, n: int, generator: torch.Generator | None = None) -> tuple[Tensor, Tensor]:
-        """``n`` (clip id, time) pairs: clips drawn with :attr:`weights`, times uniform in ``[0, duration]``."""
+    def sample(self, n: int, generator: torch.Generator | None = None, weights: Tensor | None = None) -> tuple[Tensor, Tensor]:
+        """``n`` (clip id, time) pairs: clips drawn with :attr:`weights` (or the (C,) ``weights`` given), times uniform in ``[0, duration]``."""
         dev = generator.device if generator is not None else self.device
-        ids = torch.multinomial(self._weights.to(dev), n, replacement=True, generator=generator)
+        ids = torch.multinomial((self._weights if weights is None else weights).to(dev), n, replacement=True, generator=generator)
         u = torch.rand(n, generator=generator, device=dev, dtype=torch.float64)
         times = u * self._dur64.to(dev)[ids]
         return ids.to(self.device), times.to(self.device, self.dtype)
