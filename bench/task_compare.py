@@ -24,6 +24,9 @@ one iteration) are evaluated with ``--task-eval``; the tables name N and the det
 the seeds it evaluated. ``--at-steps strike=5000000`` sets one task's budget (repeat the option; a plain N is
 the budget of the other tasks). The markdown ends with a summary: each task's primary metric per latent
 space (of the deterministic policy where evaluated, else of training), and which latent space is best.
+``--merge bench/results/task_compare.json`` adds new cells (a latent space, more seeds) to an earlier
+comparison whose run directories are gone: its cells are kept unless collected again, the budgets and
+evaluation start clips must match, and the JSON records the earlier command under ``merged_from``.
 
 ``run`` is resumable: a finished cell is reused by the pipeline, an interrupted one resumes from
 its checkpoint; cells run in seed-major order, so an early stop still leaves every pairing with
@@ -227,26 +230,26 @@ def collect(args: argparse.Namespace) -> int:
         cells[cell_dir.name] = {"task": task, "latent": latent, "seed": seed, "finished": finished, **summarize(rows)}
         if args.task_eval > 0 and finished and where == "at":
             cells[cell_dir.name]["task_eval"] = _task_eval(cell_dir, args.task_eval, args.task_eval_seconds, args.task_eval_start_clips)
+    merged_from: list[dict] = []
+    if args.merge is not None:
+        try:
+            kept, merged_from = merge_cells(args.merge, cells, budgets, args.task_eval_start_clips)
+        except ValueError as exc:
+            print(f"error: {args.merge}: {exc}", file=sys.stderr)
+            return 2
+        cells = {**kept, **cells}
     if not cells:
         print(f"error: no finished cells under {args.out}", file=sys.stderr)
         return 2
-    groups: dict[str, dict] = {}
-    for c in cells.values():
-        g = groups.setdefault(f"{c['task']}/{c['latent']}", {"seeds": [], "final": {}, "task_eval": {}})
-        g["seeds"].append(c["seed"])
-        for part in ("final", "task_eval"):
-            for k, v in c.get(part, {}).items():
-                g[part].setdefault(k, []).append(v)
-    for g in groups.values():
-        for part in ("final", "task_eval"):
-            g[part] = {k: {"mean": sum(v) / len(v), "std": _std(v), "n": len(v)} for k, v in g[part].items()}
+    groups = group_cells(cells)
     out = {
-        "command": " ".join(["python", "bench/task_compare.py", *sys.argv[1:]]),
+        "command": " ".join(["python", "bench/task_compare.py", *args.argv]),
         "at_steps": budgets.get("*"),
         "at_steps_per_task": {k: v for k, v in budgets.items() if k != "*"},
         "task_eval_start_clips": args.task_eval_start_clips,
+        "merged_from": merged_from,
         "groups": groups,
-        "cells": cells,
+        "cells": dict(sorted(cells.items())),
     }
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.with_suffix(".json").write_text(json.dumps(out, indent=1) + "\n")
@@ -261,6 +264,43 @@ def collect(args: argparse.Namespace) -> int:
             f"length {ln.get('mean', float('nan')):.1f}"
         )
     return 0
+
+
+def group_cells(cells: dict) -> dict[str, dict]:
+    """``task/latent`` -> the seeds and, per metric, {mean, std, n} over them (final values and evaluations)."""
+    groups: dict[str, dict] = {}
+    for c in cells.values():
+        g = groups.setdefault(f"{c['task']}/{c['latent']}", {"seeds": [], "final": {}, "task_eval": {}})
+        g["seeds"].append(c["seed"])
+        for part in ("final", "task_eval"):
+            for k, v in c.get(part, {}).items():
+                g[part].setdefault(k, []).append(v)
+    for g in groups.values():
+        for part in ("final", "task_eval"):
+            g[part] = {k: {"mean": sum(v) / len(v), "std": _std(v), "n": len(v)} for k, v in g[part].items()}
+    return dict(sorted(groups.items()))
+
+
+def merge_cells(path: Path, new_cells: dict, budgets: dict[str, int], start_clips: list[str] | None) -> tuple[dict, list[dict]]:
+    """The cells of an earlier ``collect`` JSON that this one did not collect again (a cell of the same
+    name collected now replaces the earlier one), and the provenance list to record: the earlier
+    command and the cells taken from it (plus whatever that JSON had merged itself). Raises ValueError
+    when the earlier comparison is not at the same budget for a task it shares with this one, or its
+    deterministic evaluations started elsewhere: those cells would not be comparable."""
+    try:
+        old = json.loads(path.read_text())
+        old_cells, old_default, old_per_task = old["cells"], old.get("at_steps"), old.get("at_steps_per_task") or {}
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ValueError(f"not a task_compare JSON ({exc})") from None
+    if old.get("task_eval_start_clips") != start_clips:
+        raise ValueError(f"its evaluations start from {old.get('task_eval_start_clips')}, this one's from {start_clips}")
+    kept = {name: c for name, c in old_cells.items() if name not in new_cells}
+    for task in sorted({c["task"] for c in kept.values()}):
+        before, now = old_per_task.get(task, old_default), budgets.get(task, budgets.get("*"))
+        if before != now:
+            raise ValueError(f"its {task} cells are at {before} env steps, this comparison's at {now}")
+    provenance = [*old.get("merged_from", []), {"command": old.get("command"), "cells": sorted(kept)}]
+    return kept, provenance
 
 
 def _budget_text(steps: int) -> str:
@@ -430,7 +470,14 @@ def main(argv: list[str] | None = None) -> int:
         default=None,
         help="compare every cell at this many env steps (its curve cut there); TASK=N for one task's budget (repeatable)",
     )
+    c.add_argument(
+        "--merge",
+        type=Path,
+        default=None,
+        help="keep the cells of this earlier collect JSON (same budgets) that are not collected again, e.g. when their run directories are gone",
+    )
     args = parser.parse_args(argv)
+    args.argv = list(sys.argv[1:] if argv is None else argv)  # recorded as the JSON's command
     return run(args) if args.command == "run" else collect(args)
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 
 import pytest
 from conftest import load_bench
@@ -211,3 +212,32 @@ def test_summary_names_the_best_latent_per_task_in_the_metric_direction(tc, tmp_
     assert tc.summary(groups)["speed"]["best"] == "pulse" and tc.summary(groups)["speed"]["values"]["pulse"]["source"] == "deterministic"
     md = out.with_suffix(".md").read_text()
     assert "| speed | speed_error (lower is better) | pulse: 1.5 ± 0.71 (2, training); scratch: 0.5 ± 0 (2, training) | scratch |" in md
+
+
+def test_merge_keeps_earlier_cells_at_the_same_budget_and_replaces_recollected_ones(tc, tmp_path, capsys):
+    first, second = tmp_path / "first", tmp_path / "second"
+    first.mkdir(), second.mkdir()
+    _cell(first, "speed", "pulse", 0, 30, value=1.0)
+    _cell(first, "speed", "scratch", 0, 30, value=0.5)
+    earlier = tmp_path / "earlier"
+    assert tc.main(["collect", "--out", str(first), "--json", str(earlier), "--at-steps", "2000"]) == 0
+    shutil.rmtree(first)  # the earlier run directories are gone; only the JSON is left
+    _cell(second, "speed", "hybrid_rvq", 0, 30, value=2.0)
+    _cell(second, "speed", "scratch", 0, 30, value=0.25)  # collected again: replaces the earlier scratch cell
+    out = tmp_path / "res"
+    args = ["collect", "--out", str(second), "--json", str(out), "--at-steps", "2000", "--merge", str(earlier.with_suffix(".json"))]
+    assert tc.main(args) == 0
+    data = json.loads(out.with_suffix(".json").read_text())
+    assert sorted(data["cells"]) == ["speed_hybrid_rvq_s0", "speed_pulse_s0", "speed_scratch_s0"]
+    assert data["groups"]["speed/scratch"]["final"]["eval/speed_error"]["mean"] == pytest.approx(0.25)
+    assert data["groups"]["speed/pulse"]["final"]["eval/speed_error"]["mean"] == pytest.approx(1.0)
+    assert data["merged_from"][-1]["cells"] == ["speed_pulse_s0"] and "--at-steps 2000" in data["merged_from"][-1]["command"]
+    assert "scratch: 0.25" in out.with_suffix(".md").read_text()
+    # a different budget for a task the earlier cells share is refused, naming the file
+    args[args.index("2000")] = "1000"
+    assert tc.main(args) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {earlier.with_suffix('.json')}") and "speed cells are at 2000" in err
+    (tmp_path / "bad.json").write_text("[1, 2]")
+    assert tc.main([*args[:-1], str(tmp_path / "bad.json")]) == 2
+    assert "not a task_compare JSON" in capsys.readouterr().err
