@@ -13,8 +13,8 @@ It writes the JSON (one record per checkpoint and noise scale, every field ``moc
 --json`` writes) and a two-panel plot next to it (``.png``): fall rate and diversity against the
 noise scale. s = 1 is the paper's setting; s = 0 rolls out the prior mean (the start states still
 differ). Falls, diversity and matching are defined in ``mocap.generation``. Each record also
-splits the falls by the clip a rollout started from (``by_start_clip``; ``falls_by_start_clip`` adds
-how many were down at the end). ``--starts all walk,run`` repeats every measurement with the rollouts
+splits the falls by the clip a rollout started from (``falls_by_start_clip`` of ``mocap.generation_eval``:
+rollouts, falls, the mean time to the first fall, how many were down at the end). ``--starts all walk,run`` repeats every measurement with the rollouts
 started from all clips and from walk and run frames only (``mocap generate --start-clips``)::
 
     python bench/generation_noise.py checkpoints/pulse_amp_v15 --noise 1 --starts all walk,run \
@@ -55,7 +55,6 @@ def run_one(loaded, target: Path, noise: float, rollouts: int, seconds: float, s
     t0 = time.perf_counter()
     result = generate_from_target(loaded, params)
     result["wall_s"] = time.perf_counter() - t0
-    result["by_start_clip"] = by_start_clip(result["start_clips"], result["fall_time_s_per_rollout"])
     result["noise_scale"] = noise
     result["starts"] = starts
     result["checkpoint"] = str(target)
@@ -75,26 +74,17 @@ def render_markdown(records: list[dict]) -> str:
             f"| {Path(r['checkpoint']).name} | {r.get('starts', 'all')} | {r['noise_scale']:g} | {r['fall_rate']:.3f} | "
             f"{r['down_at_end']:.3f} | {r['survival_s']:.2f} | {r['diversity_m']:.2f} | {r['coverage']:.3f} |"
         )
-    lines += ["", "Falls per start clip (rollouts that fell / rollouts started there; down at the end):", ""]
+    lines += ["", "Falls per start clip (rollouts that fell / rollouts started there, at the mean time to the fall; down at the end):", ""]
     for r in records:
         per = r.get("falls_by_start_clip", {})
-        text = ", ".join(f"{c} {v['falls']}/{v['rollouts']} ({v['down_at_end']})" for c, v in per.items())
+        text = ", ".join(f"{c} {v['falls']}/{v['rollouts']}{_fall_time(v)} ({v['down_at_end']})" for c, v in per.items())
         lines.append(f"- {Path(r['checkpoint']).name}, starts {r.get('starts', 'all')}, noise {r['noise_scale']:g}: {text}")
     return "\n".join([*lines, ""])
 
 
-def by_start_clip(clips: list[str], fall_times: list[float | None]) -> dict[str, dict[str, float]]:
-    """Per clip the rollouts start from: how many, the share that falls, the mean time to the first fall."""
-    out: dict[str, dict[str, float]] = {}
-    for name in sorted(set(clips)):
-        ts = [t for c, t in zip(clips, fall_times) if c == name]
-        falls = [t for t in ts if t is not None]
-        out[name] = {
-            "rollouts": len(ts),
-            "fall_rate": len(falls) / len(ts),
-            "time_to_fall_s": sum(falls) / len(falls) if falls else float("nan"),
-        }
-    return out
+def _fall_time(row: dict) -> str:
+    t = row.get("time_to_fall_s")
+    return "" if t is None else f" at {t:.1f} s"
 
 
 def plot(records: list[dict], path: Path) -> None:

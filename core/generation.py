@@ -99,8 +99,10 @@ def render_falls_by_start_clip(result: dict[str, Any]) -> str:
     rows = result.get("falls_by_start_clip") or {}
     if not rows:
         return ""
-    lines = ["| start clip | rollouts | fell | down at the end |", "|---|---|---|---|"]
-    lines += [f"| {clip} | {r['rollouts']} | {r['falls']} | {r['down_at_end']} |" for clip, r in rows.items()]
+    lines = ["| start clip | rollouts | fell | time to fall (s) | down at the end |", "|---|---|---|---|---|"]
+    for clip, r in rows.items():
+        t = r.get("time_to_fall_s")
+        lines.append(f"| {clip} | {r['rollouts']} | {r['falls']} | {'-' if t is None else f'{t:.2f}'} | {r['down_at_end']} |")
     return "\n".join(["Falls by start clip:", "", *lines, ""])
 
 

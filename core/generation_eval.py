@@ -134,15 +134,23 @@ def start_states(
     return torch.cat(ids_out)[:n], torch.cat(t_out)[:n]
 
 
-def falls_by_start_clip(clips: list[str], fell: list[bool], down_at_end: list[bool]) -> dict[str, dict[str, int]]:
-    """Per start clip (sorted by name): its rollouts, how many fell and how many were down at the end."""
-    out: dict[str, dict[str, int]] = {}
-    for clip, f, d in zip(clips, fell, down_at_end, strict=True):
-        row = out.setdefault(clip, {"rollouts": 0, "falls": 0, "down_at_end": 0})
+def falls_by_start_clip(clips: list[str], fall_times: list[float | None], down_at_end: list[bool]) -> dict[str, dict[str, Any]]:
+    """Per start clip (sorted by name): its rollouts, how many fell (``fall_times``: the time of a rollout's
+    first fall in s, None when it did not fall), the mean time to that fall over those that fell (None
+    when none did) and how many were down at the end."""
+    rows: dict[str, dict[str, Any]] = {}
+    for clip, t, d in zip(clips, fall_times, down_at_end, strict=True):
+        row = rows.setdefault(clip, {"rollouts": 0, "falls": 0, "down_at_end": 0, "_times": []})
         row["rollouts"] += 1
-        row["falls"] += int(f)
+        row["falls"] += int(t is not None)
         row["down_at_end"] += int(d)
-    return dict(sorted(out.items()))
+        if t is not None:
+            row["_times"].append(float(t))
+    out: dict[str, dict[str, Any]] = {}
+    for clip, row in sorted(rows.items()):
+        times = row.pop("_times")
+        out[clip] = {**row, "time_to_fall_s": sum(times) / len(times) if times else None}
+    return out
 
 
 def _reference_free(obs: Observations) -> Observations:
@@ -237,6 +245,7 @@ def evaluate_generation(
     matching = motion_matching(gen_trans, dataset_transitions(lib, dt, sixd), p.filter_threshold)
     starts = "library start states" if p.start_clips is None else f"start states of {', '.join(p.start_clips)}"
     start_names = [lib.clip_names[int(i)] for i in ids]
+    per_rollout = [float(f) * dt if f >= 0 else None for f in first_fall.tolist()]
     result: dict[str, Any] = {
         "protocol": f"mocap-generation-v1 (prior rollouts from {starts}; see mocap.generation)",
         "params": p.model_dump(),
@@ -250,8 +259,8 @@ def evaluate_generation(
         "diversity_m": pairwise_diversity(traj),
         **matching,
         "start_clips": start_names,
-        "fall_time_s_per_rollout": [float(f) * dt if f >= 0 else None for f in first_fall.tolist()],
-        "falls_by_start_clip": falls_by_start_clip(start_names, fell.tolist(), down.tolist()),
+        "fall_time_s_per_rollout": per_rollout,
+        "falls_by_start_clip": falls_by_start_clip(start_names, per_rollout, down.tolist()),
     }
     if recorder is not None:
         for frames in frames_by_env:

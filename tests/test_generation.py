@@ -134,11 +134,13 @@ def test_generation_stage_and_command(pulse_run, tmp_path):
 def test_falls_by_start_clip_counts_per_clip():
     from mocap.generation_eval import falls_by_start_clip
 
-    rows = falls_by_start_clip(["walk", "kick", "walk", "walk"], [True, True, False, False], [False, True, False, True])
+    rows = falls_by_start_clip(["walk", "kick", "walk", "walk"], [2.0, 0.5, None, None], [False, True, False, True])
     assert list(rows) == ["kick", "walk"]
-    assert rows["walk"] == {"rollouts": 3, "falls": 1, "down_at_end": 1} and rows["kick"] == {"rollouts": 1, "falls": 1, "down_at_end": 1}
+    assert rows["walk"] == {"rollouts": 3, "falls": 1, "down_at_end": 1, "time_to_fall_s": 2.0}
+    assert rows["kick"] == {"rollouts": 1, "falls": 1, "down_at_end": 1, "time_to_fall_s": 0.5}
+    assert falls_by_start_clip(["run"], [None], [False])["run"]["time_to_fall_s"] is None
     with pytest.raises(ValueError):
-        falls_by_start_clip(["walk"], [True, False], [False])
+        falls_by_start_clip(["walk"], [1.0, None], [False])
 
 
 def test_start_states_only_from_the_named_clips(amp):
@@ -166,7 +168,7 @@ def test_generate_start_clips_and_the_per_clip_table(pulse_run, tmp_path):
     table = json.loads(out.read_text())
     assert table["start_clips"] == ["walk", "walk"] and table["params"]["start_clips"] == ["walk"]
     assert table["falls_by_start_clip"]["walk"]["rollouts"] == 2 and "start states of walk" in table["protocol"]
-    assert "| start clip | rollouts | fell | down at the end |" in result.stdout and "| walk | 2 |" in result.stdout
+    assert "| start clip | rollouts | fell | time to fall (s) | down at the end |" in result.stdout and "| walk | 2 |" in result.stdout
     bad = invoke(["generate", pulse_run, "--rollouts", "2", "--seconds", "0.2", "--start-clips", "kick"])
     assert bad.exit_code == 2 and "Traceback" not in bad.output and "no clip 'kick'" in bad.stderr
     empty = invoke(["generate", pulse_run, "--rollouts", "2", "--start-clips", " , "])
