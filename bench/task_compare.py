@@ -421,7 +421,8 @@ def _plot(cells: dict, path: Path) -> None:
                 if not y.size:
                     continue
                 ax = axes[row][col]
-                (line,) = ax.plot(x, np.nanmean(y, 0), label=f"{latent} ({len(runs)} seed{'s' * (len(runs) > 1)})")
+                color = f"C{latents.index(latent) % 10}"  # one colour per latent space in every panel
+                (line,) = ax.plot(x, np.nanmean(y, 0), color=color, label=f"{latent} ({len(runs)} seed{'s' * (len(runs) > 1)})")
                 if len(runs) > 1:
                     ax.fill_between(x, np.nanmin(y, 0), np.nanmax(y, 0), color=line.get_color(), alpha=0.2)
         axes[0][col].set_title(task)
