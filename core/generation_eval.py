@@ -139,18 +139,15 @@ def falls_by_start_clip(clips: list[str], fall_times: list[float | None], down_a
     first fall in s, None when it did not fall), the mean time to that fall over those that fell (None
     when none did) and how many were down at the end."""
     rows: dict[str, dict[str, Any]] = {}
+    times: dict[str, list[float]] = {}
     for clip, t, d in zip(clips, fall_times, down_at_end, strict=True):
-        row = rows.setdefault(clip, {"rollouts": 0, "falls": 0, "down_at_end": 0, "_times": []})
+        row = rows.setdefault(clip, {"rollouts": 0, "falls": 0, "down_at_end": 0})
         row["rollouts"] += 1
         row["falls"] += int(t is not None)
         row["down_at_end"] += int(d)
         if t is not None:
-            row["_times"].append(float(t))
-    out: dict[str, dict[str, Any]] = {}
-    for clip, row in sorted(rows.items()):
-        times = row.pop("_times")
-        out[clip] = {**row, "time_to_fall_s": sum(times) / len(times) if times else None}
-    return out
+            times.setdefault(clip, []).append(float(t))
+    return {clip: {**row, "time_to_fall_s": sum(times[clip]) / len(times[clip]) if clip in times else None} for clip, row in sorted(rows.items())}
 
 
 def _reference_free(obs: Observations) -> Observations:
