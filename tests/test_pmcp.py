@@ -26,6 +26,7 @@ from mocap_phc.pmcp import (
     PlateauTracker,
     PMCPParams,
     compose,
+    composer_bias,
     next_hard_set,
     unique_clip_names,
 )
@@ -99,6 +100,30 @@ def test_relu_clamps_negative_weights(d, seed, form):
     # multiplicative is a convex combination: inside the per-dimension range of the means
     out = compose(w, mu, "multiplicative")
     assert torch.all(out <= mu.max(-2).values + 1e-9) and torch.all(out >= mu.min(-2).values - 1e-9)
+
+
+@SETTINGS
+@given(dims, seeds, st.data())
+def test_composer_bias_per_primitive_starts_the_composite_as_one_primitive(d, seed, data):
+    """`composer_init_weight` as one value per primitive: [0, .., 1, .., 0] makes the first composite
+    the chosen primitive alone (multiplicative form, up to the eps nudge); None and a number fill."""
+    n, k, a = d
+    mu = _means(seed, n, k, a)
+    j = data.draw(st.integers(0, k - 1))
+    bias = composer_bias([1.0 if i == j else 0.0 for i in range(k)], k)
+    out = compose(bias.to(F64).expand(n, k), mu, "multiplicative", 0.0)
+    torch.testing.assert_close(out, mu[:, j])
+    assert torch.equal(composer_bias(None, k), torch.full((k,), 1.0 / k))
+    assert torch.equal(composer_bias(0.3, k), torch.full((k,), 0.3))
+    with pytest.raises(ValueError, match=f"for {k + 1} primitives"):
+        composer_bias([1.0] * k, k + 1)
+
+
+def test_composer_init_weights_must_fit_the_primitives():
+    PMCPParams(max_primitives=1, composer_init_weight=[1.0])
+    with pytest.raises(ValidationError, match="at most 1 primitives"):
+        PMCPParams(max_primitives=1, composer_init_weight=[1.0, 0.0])
+    assert PMCPParams(max_primitives=1, recovery={"clips": ["walk"]}, composer_init_weight=[1.0, 0.0]).composer_init_weight == [1.0, 0.0]
 
 
 def test_composite_policy_mixes_each_primitive_on_its_own_normalizer():

@@ -92,6 +92,7 @@ from mocap_phc.pmcp_composite import (
     CompositePolicy,
     _net,
     compose,
+    composer_bias,
     composite_policy_from,
     is_pmcp_checkpoint,
     make_composite_imitator,
@@ -488,11 +489,11 @@ class PMCPTrainer(Trainer):
         ids = list(range(len(self.clip_names)))
         seed = self._phase_seed(1000)
         phase_dir = self.workdir / "composer"
-        w0 = 1.0 / K if p.composer_init_weight is None else float(p.composer_init_weight)
+        w0 = composer_bias(p.composer_init_weight, K)
 
         def init(model: ActorCritic) -> None:
             with torch.no_grad():
-                model.action_head.bias.fill_(w0)
+                model.action_head.bias.copy_(w0)
 
         env_params = self._recovery_params(p.recovery.composer_fail_states) if p.recovery is not None else None
 
@@ -582,6 +583,7 @@ __all__ = [
     "PrimitiveEnv",
     "RecoveryPhaseParams",
     "compose",
+    "composer_bias",
     "composite_policy_from",
     "is_pmcp_checkpoint",
     "make_composite_imitator",

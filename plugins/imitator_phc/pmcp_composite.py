@@ -35,6 +35,20 @@ def compose(weights: Tensor, means: Tensor, form: ComposerForm, eps: float = 1e-
     raise ValueError(f"unknown composer form {form!r}; choose 'weighted_sum' or 'multiplicative'")
 
 
+def composer_bias(init: float | Sequence[float] | None, k: int) -> Tensor:
+    """The composer's initial output (its action head's bias) for ``k`` primitives: ``1/k`` each for
+    None, ``init`` each for a number, or ``init`` itself for one value per primitive (a wrong count
+    is a ValueError naming both)."""
+    if init is None:
+        return torch.full((k,), 1.0 / k)
+    if isinstance(init, (int, float)):
+        return torch.full((k,), float(init))
+    values = [float(v) for v in init]
+    if len(values) != k:
+        raise ValueError(f"composer_init_weight has {len(values)} values for {k} primitives; give one per primitive (P(F) last) or one number")
+    return torch.tensor(values)
+
+
 class CompositePolicy(nn.Module):
     """Frozen primitives + composer as one policy on PHC's flat observation (``mean_action``/``act``).
 

@@ -176,10 +176,12 @@ class PMCPParams(BaseModel):
         "fixed sigma) or 'weighted_sum' = sum_i relu(w_i) mu_i, unnormalized ([C] ReLU composer output)",
     )
     composer_eps: float = Field(1e-6, ge=0.0, description="multiplicative form: added to every relu(w_i) so that the normalizer never vanishes ([I])")
-    composer_init_weight: float | None = Field(
+    composer_init_weight: float | list[float] | None = Field(
         None,
-        description="initial composer output (the action head's bias) for every primitive; None: 1/K, i.e. the mean of the "
-        "primitives' means in both forms ([I]; [C] starts from a random ReLU MLP)",
+        description="initial composer output (the action head's bias): one value for every primitive, or one per primitive "
+        "in order (P(F) last; e.g. [1, 0] starts the composite as primitive 0 alone, so it tracks as that primitive does "
+        "before the composer has learned when to hand over); None: 1/K, i.e. the mean of the primitives' means in both "
+        "forms ([I]; [C] starts from a random ReLU MLP)",
     )
     recovery: RecoveryPhaseParams | None = Field(
         None,
@@ -192,3 +194,11 @@ class PMCPParams(BaseModel):
         description="PPO of the composer on all clips (its actor_hidden / activation are the composer MLP: [C] [1024, 512], "
         "ReLU); default exploration on the weights with fixed sigma = exp(-2.9) ([C])",
     )
+
+    @model_validator(mode="after")
+    def _init_weights_fit(self) -> "PMCPParams":
+        w = self.composer_init_weight
+        most = self.max_primitives + (1 if self.recovery is not None else 0)
+        if isinstance(w, list) and not 1 <= len(w) <= most:
+            raise ValueError(f"composer_init_weight has {len(w)} values; the composer mixes at most {most} primitives (max_primitives + P(F))")
+        return self
