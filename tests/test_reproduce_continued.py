@@ -91,3 +91,25 @@ def test_imitator_v16_is_continue_v15_and_continue_v16_carries_on():
     a, b = nxt.imitator.trainer.params, recipe.imitator.trainer.params
     assert Path(a["init_policy"]).resolve() == (ROOT / "checkpoints" / "imitator_amp_v16" / "policy.pt").resolve()
     assert {k: v for k, v in a.items() if k != "init_policy"} == {k: v for k, v in b.items() if k != "init_policy"}
+
+
+def test_imitator_v17_is_continue_v16_with_kl_target_0003_and_continue_v17_carries_on():
+    """checkpoints/imitator_amp_v17: the last (10.01M) snapshot of continue_v16.yaml + desired_kl 0.003 from v16
+    (seed 0); continue_v17.yaml is that recipe from v17."""
+    import torch
+
+    data, embedded = _checkpoint("imitator_amp_v17")
+    plugins = get_plugins()
+    recipe = load_spec(ROOT / "specs" / "imitator" / "continue_v16.yaml", plugins).spec
+    assert embedded["name"] == recipe.name and embedded["seed"] == 0
+    trained = embedded["imitator"]["trainer"]["params"]
+    assert trained["init_policy"] == "../imitator_amp_v16/policy.pt" and trained["desired_kl"] == 0.003
+    assert data["extra"]["env_steps"] == 10010624
+    assert torch.allclose(data["state_dict"]["log_std"], torch.full_like(data["state_dict"]["log_std"], -2.9))
+    nxt = load_spec(ROOT / "specs" / "imitator" / "continue_v17.yaml", plugins).spec
+    assert nxt.motions == recipe.motions and nxt.humanoid == recipe.humanoid and nxt.imitator.params == recipe.imitator.params
+    a, b = nxt.imitator.trainer.params, recipe.imitator.trainer.params
+    assert Path(a["init_policy"]).resolve() == (ROOT / "checkpoints" / "imitator_amp_v17" / "policy.pt").resolve()
+    assert a["desired_kl"] == 0.003 and b["desired_kl"] == 0.01
+    skip = ("init_policy", "desired_kl")
+    assert {k: v for k, v in a.items() if k not in skip} == {k: v for k, v in b.items() if k not in skip}
