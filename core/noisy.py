@@ -27,6 +27,13 @@ the delivered stream, as a live avatar would apply (:func:`smooth_clip`): ``p_k 
 p_(k-1))`` for the root position and ``q_k = slerp(q_(k-1), x_k, a)`` for every rotation, ``a`` in
 (0, 1] (1: no smoothing). It trades jitter for a lag of about ``(1 - a) / a`` frames.
 
+Consumer-side velocities (``velocities``, default: the policy's own motion settings): the reference
+velocities the policy observes are derived from the delivered frames by the motion library, with
+forward differences or PHC's code's Gaussian-smoothed central differences
+(:class:`~mocap.motion.sources.ReferenceVelocityParams`). Forward differences turn 1 cm of root
+jitter at 30 fps into ~0.4 m/s of velocity noise; ``central_smoothed`` reads about 3 ``velocity_sigma``
+frames ahead of each frame (offline clips have them; a live stream pays them as latency).
+
 Protocol (:func:`evaluate_noisy`): for each level, the same imitation protocol as ``mocap eval``
 (:func:`mocap.imitation_eval.evaluate_imitator`: every clip once from its first frame, deterministic
 actions, failure when the mean body error exceeds 0.5 m) with the policy observing the noisy
@@ -144,10 +151,11 @@ def smooth_clip(clip: Any, alpha: float) -> Any:
     return replace(clip, root_pos=pos, root_rot=root_rot, joint_rot=joint_rot)
 
 
-def noisy_library(library: Any, level: NoiseLevel, seed: int, smooth: float = 1.0) -> Any:
+def noisy_library(library: Any, level: NoiseLevel, seed: int, smooth: float = 1.0, velocities: str | None = None, velocity_sigma: float | None = None) -> Any:
     """A :class:`~mocap.motion.library.MotionLibrary` of the noisy versions of ``library``'s clips
     (same order, device, dtype and interpolation), smoothed by the consumer's filter when ``smooth``
-    is below 1; ``seed`` fixes the noise."""
+    is below 1; ``seed`` fixes the noise. ``velocities`` / ``velocity_sigma``: how its velocities are
+    derived (None: as ``library``'s)."""
     from mocap.motion.library import MotionLibrary
 
     rng = np.random.default_rng(seed)
@@ -155,7 +163,8 @@ def noisy_library(library: Any, level: NoiseLevel, seed: int, smooth: float = 1.
     return MotionLibrary(
         clips, library.skeleton, device=library.device, dtype=library.dtype,
         loop_heading=library.loop_heading, body_interp=library.body_interp,
-        velocities=library.velocities, velocity_sigma=library.velocity_sigma,
+        velocities=velocities or library.velocities,
+        velocity_sigma=velocity_sigma if velocity_sigma is not None else library.velocity_sigma,
     )  # fmt: skip
 
 
@@ -169,6 +178,8 @@ def evaluate_noisy(
     num_envs: int = 64,
     horizon: float | None = None,
     smooth: float = 1.0,
+    velocities: str | None = None,
+    velocity_sigma: float | None = None,
     console: Any = None,
 ) -> dict[str, Any]:
     """The protocol of the module docstring: one imitation-evaluation table per level.
@@ -187,7 +198,8 @@ def evaluate_noisy(
     rows = []
     for i, level in enumerate(levels):
         index = DEFAULT_LEVELS.index(level) if level in DEFAULT_LEVELS else len(DEFAULT_LEVELS) + i
-        observed = None if level.clean and smooth == 1 else noisy_library(library, level, seed + index, smooth)
+        same = level.clean and smooth == 1 and velocities is None and velocity_sigma is None
+        observed = None if same else noisy_library(library, level, seed + index, smooth, velocities, velocity_sigma)
         actor = policy if isinstance(policy, Imitator) else policy(observed if observed is not None else library)
         table = evaluate_imitator(actor, library, make_sim, params, default_metrics(), console, observed=observed)
         rows.append(
@@ -203,6 +215,8 @@ def evaluate_noisy(
         "imitation_protocol": table["protocol"],
         "seed": seed,
         "smooth": smooth,
+        "velocities": velocities or library.velocities,
+        "velocity_sigma": velocity_sigma if velocity_sigma is not None else library.velocity_sigma,
         "horizon": table["horizon"],
         "units": table["units"],
         "levels": rows,
@@ -214,6 +228,8 @@ def render_noisy(result: dict[str, Any]) -> Any:
     from rich.table import Table
 
     filt = f"; consumer smoothing a = {result['smooth']:g}" if result.get("smooth", 1.0) != 1 else ""
+    if result.get("velocities", "forward") != "forward":
+        filt += f"; velocities {result['velocities']} (sigma {result.get('velocity_sigma', 2.0):g} frames)"
     out = Table(title=f"imitation from noisy references ({result['horizon']}; errors against the clean clip{filt})")
     for col in ("level", "joint °", "root °", "root cm", "dropped", "success", "MPJPE-g mm", "MPJPE-l mm", "PA-MPJPE mm", "acc err"):
         out.add_column(col, justify="right")
@@ -269,6 +285,11 @@ def register_commands(app: Any) -> None:
         seed: Annotated[int, typer.Option("--seed", help="seed of the noise (default level k uses seed + k)")] = 0,
         loop: Annotated[Optional[float], typer.Option("--loop", help="looping clips keep cycling for this many seconds")] = None,
         smooth: Annotated[float, typer.Option("--smooth", help="causal exponential smoothing of the stream, a in (0, 1] (1: none)")] = 1.0,
+        velocities: Annotated[
+            Optional[str],
+            typer.Option("--velocities", help="how the stream's reference velocities are derived: forward or central_smoothed (default: the policy's)"),
+        ] = None,
+        velocity_sigma: Annotated[Optional[float], typer.Option("--velocity-sigma", help="frames, the Gaussian of central_smoothed")] = None,
         num_envs: Annotated[int, typer.Option(help="clips simulated in parallel")] = 64,
         json_out: Annotated[Optional[Path], typer.Option("--json", help="write the result as JSON")] = None,
         imitator_only: Annotated[bool, typer.Option("--imitator-only", help="for a latent space: evaluate the imitator it was distilled from")] = False,
@@ -287,6 +308,10 @@ def register_commands(app: Any) -> None:
         chosen = parse_levels(levels)
         if not 0 < smooth <= 1:
             raise UserError(f"--smooth must be in (0, 1], got {smooth:g}")
+        if velocities is not None and velocities not in ("forward", "central_smoothed"):
+            raise UserError(f"--velocities must be forward or central_smoothed, not {velocities!r}")
+        if velocity_sigma is not None and not 0 < velocity_sigma <= 100:
+            raise UserError(f"--velocity-sigma must be in (0, 100] frames, got {velocity_sigma:g}")
         console = Console(stderr=True)
         plugins = get_plugins()
         info = load_evaluation_target(target, plugins)
@@ -297,7 +322,10 @@ def register_commands(app: Any) -> None:
             dt = float(probe.dt)
             probe.close()
             policy = lambda lib: loaded.latent.as_imitator(lib, dt=dt)  # noqa: E731 - bound to the clips it tracks
-        result = evaluate_noisy(policy, loaded.library, loaded.make_sim, chosen, seed=seed, num_envs=num_envs, horizon=loop, smooth=smooth, console=console)
+        result = evaluate_noisy(
+            policy, loaded.library, loaded.make_sim, chosen, seed=seed, num_envs=num_envs, horizon=loop, smooth=smooth,
+            velocities=velocities, velocity_sigma=velocity_sigma, console=console,
+        )  # fmt: skip
         result["evaluated"] = str(target)
         stdout = Console(width=None if sys.stdout.isatty() else 160)
         stdout.print(render_noisy(result))
