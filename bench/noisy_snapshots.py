@@ -27,7 +27,7 @@ import time
 from pathlib import Path
 
 
-def eval_noisy(snapshot: Path, level: str, seed: int, smooth: float = 1.0) -> dict:
+def eval_noisy(snapshot: Path, level: str, seed: int, smooth: float = 1.0, velocities: str | None = None) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "noisy.json"
         env = {**os.environ, "OMP_NUM_THREADS": "1"}
@@ -45,7 +45,7 @@ def eval_noisy(snapshot: Path, level: str, seed: int, smooth: float = 1.0) -> di
             f"{smooth:g}",
             "--json",
             str(out),
-        ]
+        ] + ([] if velocities is None else ["--velocities", velocities])
         proc = subprocess.run(cmd, env=env, capture_output=True, text=True)
         if proc.returncode != 0:
             raise SystemExit(f"error: {snapshot}: eval-noisy failed: {proc.stderr.strip().splitlines()[-1:]}")
@@ -86,6 +86,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--level", default="1", help="a noise level as `mocap eval-noisy --levels` takes it (one level)")
     parser.add_argument("--seeds", default="0,1,2", help="noise seeds, comma-separated")
     parser.add_argument("--smooth", default="1", help="smoothing factors a in (0, 1], comma-separated (1: the raw stream)")
+    parser.add_argument("--velocities", default=None, help="`mocap eval-noisy --velocities` (default: each policy's own)")
     parser.add_argument("--out", type=Path, required=True, help="output stem: writes STEM.json and STEM.png")
     args = parser.parse_args(argv)
     seeds = [int(s) for s in args.seeds.split(",") if s.strip()]
@@ -114,7 +115,7 @@ def main(argv: list[str] | None = None) -> int:
         points = []
         for snap in snapshots:
             path = Path(snap["path"])
-            runs = [eval_noisy(path, args.level, s, a) for a in smooths for s in seeds]
+            runs = [eval_noisy(path, args.level, s, a, args.velocities) for a in smooths for s in seeds]
             point = {"env_steps": snap["env_steps"], "minutes": snap.get("minutes"), "snapshot": str(path), "noisy": runs, "clean": clean_eval(path.parent)}
             for a in smooths:
                 mine = [r["succeeded"] for r in runs if r["smooth"] == a]
@@ -128,6 +129,7 @@ def main(argv: list[str] | None = None) -> int:
         "level": args.level,
         "seeds": seeds,
         "smooth": smooths,
+        "velocities": args.velocities or "each policy's own",
         "arms": arms,
         "load_avg_at_end": list(load),
         "finished": time.strftime("%Y-%m-%dT%H:%M:%S"),
