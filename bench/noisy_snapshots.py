@@ -72,6 +72,39 @@ def clean_eval(snapshot_dir: Path) -> dict | None:
     return {"succeeded": agg["succeeded"], "total": agg["total"], "mpjpe_g_mm": agg["mpjpe_g"]}
 
 
+def plot(result: dict, path: Path) -> None:
+    """Clips tracked on the noisy stream (solid, band: min-max over noise seeds) and on the clean clips (dashed,
+    same colour) against the env steps of each arm."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(1, 1, figsize=(10, 4.5))
+    line = 0
+    for arm in result["arms"]:
+        x = [p["env_steps"] / 1e6 for p in arm["points"]]
+        first = f"C{line % 10}"
+        for a in result["smooth"]:
+            color = f"C{line % 10}"
+            line += 1
+            noisy = [[r["succeeded"] for r in p["noisy"] if r["smooth"] == a] for p in arm["points"]]
+            name = f"{arm['label']}: noisy level {result['level']}" + (f", smoothing {a:g}" if a != 1 else "")
+            ax.plot(x, [sum(v) / len(v) for v in noisy], "o-", color=color, label=name)
+            ax.fill_between(x, [min(v) for v in noisy], [max(v) for v in noisy], color=color, alpha=0.15)
+        clean = [p["clean"]["succeeded"] if p["clean"] else float("nan") for p in arm["points"]]
+        ax.plot(x, clean, "s--", color=first, alpha=0.6, label=f"{arm['label']}: clean clips")
+    ax.set_xlabel("env steps of the run (M)")
+    ax.set_ylabel("clips tracked (of 15)")
+    seeds = ",".join(str(s) for s in result["seeds"])
+    ax.set_title(f"noisy references, level {result['level']}: mean and min-max over noise seeds {seeds}; clean clips dashed")
+    ax.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.01, 0.5))
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
 def _pair(spec: str, option: str, form: str) -> tuple[str, str]:
     label, sep, value = spec.partition("=")
     if not sep or not label or not value:
@@ -87,8 +120,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", default="0,1,2", help="noise seeds, comma-separated")
     parser.add_argument("--smooth", default="1", help="smoothing factors a in (0, 1], comma-separated (1: the raw stream)")
     parser.add_argument("--velocities", default=None, help="`mocap eval-noisy --velocities` (default: each policy's own)")
+    parser.add_argument("--replot", type=Path, default=None, help="no evaluation: redraw the PNG of this JSON (written by this script)")
     parser.add_argument("--out", type=Path, required=True, help="output stem: writes STEM.json and STEM.png")
     args = parser.parse_args(argv)
+    if args.replot is not None:
+        if not args.replot.is_file():
+            raise SystemExit(f"error: {args.replot}: not found")
+        plot(json.loads(args.replot.read_text()), args.out.with_suffix(".png"))
+        print(f"wrote {args.out.with_suffix('.png')}")
+        return 0
     seeds = [int(s) for s in args.seeds.split(",") if s.strip()]
 
     smooths = [float(a) for a in args.smooth.split(",") if a.strip()]
@@ -138,31 +178,7 @@ def main(argv: list[str] | None = None) -> int:
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.with_suffix(".json").write_text(json.dumps(result, indent=1) + "\n")
 
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(1, 1, figsize=(7, 4))
-    line = 0
-    for arm in arms:
-        x = [p["env_steps"] / 1e6 for p in arm["points"]]
-        for a in smooths:
-            color = f"C{line % 10}"
-            line += 1
-            noisy = [[r["succeeded"] for r in p["noisy"] if r["smooth"] == a] for p in arm["points"]]
-            name = f"{arm['label']}: noisy level {args.level}" + (f", smoothing {a:g}" if a != 1 else "")
-            ax.plot(x, [sum(v) / len(v) for v in noisy], "o-", color=color, label=name)
-            ax.fill_between(x, [min(v) for v in noisy], [max(v) for v in noisy], color=color, alpha=0.2)
-        clean = [p["clean"]["succeeded"] if p["clean"] else float("nan") for p in arm["points"]]
-        ax.plot(x, clean, "s--", color="grey", alpha=0.6, label=f"{arm['label']}: clean clips")
-    ax.set_xlabel("env steps of the run (M)")
-    ax.set_ylabel("clips tracked (of 15)")
-    ax.set_title(f"noisy references, level {args.level}: mean and min-max over noise seeds {args.seeds}")
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(args.out.with_suffix(".png"), dpi=100)
+    plot(result, args.out.with_suffix(".png"))
     print(f"wrote {args.out.with_suffix('.json')} and {args.out.with_suffix('.png')}")
     return 0
 

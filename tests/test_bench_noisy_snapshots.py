@@ -49,3 +49,14 @@ def test_an_arm_without_snapshots_is_one_error_line(ns, tmp_path):
     (tmp_path / "snapshots.json").write_text(json.dumps({"snapshots": []}))
     ns.main(["--arm", f"a={tmp_path}", "--out", str(tmp_path / "x")])
     assert json.loads((tmp_path / "x.json").read_text())["arms"][0]["points"] == []
+
+
+def test_replot_draws_a_committed_result(ns, tmp_path):
+    point = {"env_steps": 1_000_000, "noisy": [{"smooth": 1.0, "succeeded": s} for s in (5, 7)], "clean": {"succeeded": 14}}
+    result = {"level": "1", "seeds": [0, 1], "smooth": [1.0], "arms": [{"label": "a", "points": [point]}]}
+    src = tmp_path / "r.json"
+    src.write_text(json.dumps(result))
+    assert ns.main(["--replot", str(src), "--out", str(tmp_path / "r")]) == 0
+    assert (tmp_path / "r.png").stat().st_size > 1000
+    with pytest.raises(SystemExit, match="not found"):
+        ns.main(["--replot", str(tmp_path / "none.json"), "--out", str(tmp_path / "r")])

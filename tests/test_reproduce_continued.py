@@ -113,3 +113,25 @@ def test_imitator_v17_is_continue_v16_with_kl_target_0003_and_continue_v17_carri
     assert a["desired_kl"] == 0.003 and b["desired_kl"] == 0.01
     skip = ("init_policy", "desired_kl")
     assert {k: v for k, v in a.items() if k not in skip} == {k: v for k, v in b.items() if k not in skip}
+
+
+def test_imitator_v18_is_continue_v17_with_smoothed_velocities_and_continue_v18_carries_on():
+    """checkpoints/imitator_amp_v18: the last (6.01M) snapshot of continue_v17_vel.yaml from v17 (seed 0): v17's recipe
+    with PHC's code's reference velocities; continue_v18.yaml is that recipe from v18."""
+    data, embedded = _checkpoint("imitator_amp_v18")
+    plugins = get_plugins()
+    recipe = load_spec(ROOT / "specs" / "imitator" / "continue_v17_vel.yaml", plugins).spec
+    base = load_spec(ROOT / "specs" / "imitator" / "continue_v17.yaml", plugins).spec
+    assert embedded["name"] == recipe.name and embedded["seed"] == 0
+    assert embedded["motions"]["params"]["velocities"] == "central_smoothed" and embedded["motions"]["params"]["velocity_sigma"] == 2.0
+    assert embedded["imitator"]["trainer"]["params"]["init_policy"] == "../imitator_amp_v17/policy.pt"
+    assert data["extra"]["env_steps"] == 6012928
+    # the lever is the velocities only: the rest of the motions, the humanoid and the imitator are v17's recipe
+    assert recipe.motions.params["velocities"] == "central_smoothed" and base.motions.params["velocities"] == "forward"
+    assert {k: v for k, v in recipe.motions.params.items() if k != "velocities"} == {k: v for k, v in base.motions.params.items() if k != "velocities"}
+    assert recipe.humanoid == base.humanoid and recipe.imitator == base.imitator
+    nxt = load_spec(ROOT / "specs" / "imitator" / "continue_v18.yaml", plugins).spec
+    assert nxt.motions == recipe.motions and nxt.humanoid == recipe.humanoid and nxt.imitator.params == recipe.imitator.params
+    a, b = nxt.imitator.trainer.params, recipe.imitator.trainer.params
+    assert Path(a["init_policy"]).resolve() == (ROOT / "checkpoints" / "imitator_amp_v18" / "policy.pt").resolve()
+    assert {k: v for k, v in a.items() if k != "init_policy"} == {k: v for k, v in b.items() if k != "init_policy"}
