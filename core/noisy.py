@@ -55,6 +55,7 @@ import typer
 from pydantic import BaseModel, ConfigDict, Field
 
 from mocap.hooks import hookimpl
+from mocap.motion.sources import VelocityMode
 
 # torch is imported by the functions that use it: loading the plugin (``mocap --help``) imports no torch
 
@@ -151,7 +152,9 @@ def smooth_clip(clip: Any, alpha: float) -> Any:
     return replace(clip, root_pos=pos, root_rot=root_rot, joint_rot=joint_rot)
 
 
-def noisy_library(library: Any, level: NoiseLevel, seed: int, smooth: float = 1.0, velocities: str | None = None, velocity_sigma: float | None = None) -> Any:
+def noisy_library(
+    library: Any, level: NoiseLevel, seed: int, smooth: float = 1.0, velocities: VelocityMode | None = None, velocity_sigma: float | None = None
+) -> Any:
     """A :class:`~mocap.motion.library.MotionLibrary` of the noisy versions of ``library``'s clips
     (same order, device, dtype and interpolation), smoothed by the consumer's filter when ``smooth``
     is below 1; ``seed`` fixes the noise. ``velocities`` / ``velocity_sigma``: how its velocities are
@@ -160,10 +163,11 @@ def noisy_library(library: Any, level: NoiseLevel, seed: int, smooth: float = 1.
 
     rng = np.random.default_rng(seed)
     clips = [smooth_clip(noisy_clip(c, level, rng), smooth) for c in library.clips]
+    rule: VelocityMode = velocities if velocities is not None else library.velocities
     return MotionLibrary(
         clips, library.skeleton, device=library.device, dtype=library.dtype,
         loop_heading=library.loop_heading, body_interp=library.body_interp,
-        velocities=velocities or library.velocities,
+        velocities=rule,
         velocity_sigma=velocity_sigma if velocity_sigma is not None else library.velocity_sigma,
     )  # fmt: skip
 
@@ -178,7 +182,7 @@ def evaluate_noisy(
     num_envs: int = 64,
     horizon: float | None = None,
     smooth: float = 1.0,
-    velocities: str | None = None,
+    velocities: VelocityMode | None = None,
     velocity_sigma: float | None = None,
     console: Any = None,
 ) -> dict[str, Any]:
@@ -310,6 +314,7 @@ def register_commands(app: Any) -> None:
             raise UserError(f"--smooth must be in (0, 1], got {smooth:g}")
         if velocities is not None and velocities not in ("forward", "central_smoothed"):
             raise UserError(f"--velocities must be forward or central_smoothed, not {velocities!r}")
+        rule: VelocityMode | None = "forward" if velocities == "forward" else "central_smoothed" if velocities else None
         if velocity_sigma is not None and not 0 < velocity_sigma <= 100:
             raise UserError(f"--velocity-sigma must be in (0, 100] frames, got {velocity_sigma:g}")
         console = Console(stderr=True)
@@ -324,7 +329,7 @@ def register_commands(app: Any) -> None:
             policy = lambda lib: loaded.latent.as_imitator(lib, dt=dt)  # noqa: E731 - bound to the clips it tracks
         result = evaluate_noisy(
             policy, loaded.library, loaded.make_sim, chosen, seed=seed, num_envs=num_envs, horizon=loop, smooth=smooth,
-            velocities=velocities, velocity_sigma=velocity_sigma, console=console,
+            velocities=rule, velocity_sigma=velocity_sigma, console=console,
         )  # fmt: skip
         result["evaluated"] = str(target)
         stdout = Console(width=None if sys.stdout.isatty() else 160)
