@@ -121,14 +121,19 @@ def test_observed_library_changes_only_what_the_policy_sees(amp):
     assert noisy["aggregate"]["mpjpe_l"] > clean["aggregate"]["mpjpe_l"] + 5.0
 
 
-def test_eval_noisy_command(tmp_path: Path):
-    from mocap.testing import invoke
-
+def _pd_replay_spec(tmp_path: Path) -> Path:
     spec = tmp_path / "spec.yaml"
     spec.write_text(
         "spec_version: 1\nname: noisy-cmd\nhumanoid: {name: amp}\n"
         "motions: {name: deepmimic, params: {clips: [walk]}}\nsimulator: {name: mujoco}\nimitator: {name: pd_replay}\n"
     )
+    return spec
+
+
+def test_eval_noisy_command(tmp_path: Path):
+    from mocap.testing import invoke
+
+    spec = _pd_replay_spec(tmp_path)
     out = tmp_path / "noisy.json"
     result = invoke(["eval-noisy", spec, "--levels", "0,2", "--json", out])
     assert result.exit_code == 0, result.output
@@ -208,11 +213,7 @@ def test_velocity_override_smooths_what_the_policy_sees(amp):
 def test_eval_noisy_velocities_option(tmp_path: Path):
     from mocap.testing import invoke
 
-    spec = tmp_path / "spec.yaml"
-    spec.write_text(
-        "spec_version: 1\nname: noisy-vel\nhumanoid: {name: amp}\n"
-        "motions: {name: deepmimic, params: {clips: [walk]}}\nsimulator: {name: mujoco}\nimitator: {name: pd_replay}\n"
-    )
+    spec = _pd_replay_spec(tmp_path)
     out = tmp_path / "noisy.json"
     result = invoke(["eval-noisy", spec, "--levels", "0", "--velocities", "central_smoothed", "--json", out])
     assert result.exit_code == 0, result.output
