@@ -137,18 +137,19 @@ def test_imitator_v18_is_continue_v17_with_smoothed_velocities_and_continue_v18_
     assert {k: v for k, v in a.items() if k != "init_policy"} == {k: v for k, v in b.items() if k != "init_policy"}
 
 
-def test_imitator_v19_is_continue_v18_and_continue_v19_carries_on():
-    """checkpoints/imitator_amp_v19: the last (6.01M) snapshot of continue_v18.yaml from v18 (seed 0);
-    continue_v19.yaml is the same recipe from v19."""
-    data, embedded = _checkpoint("imitator_amp_v19")
+@pytest.mark.parametrize(("name", "source", "steps"), [("v19", "v18", 6012928), ("v20", "v19", 4014080)])
+def test_an_imitator_continued_on_smoothed_velocities_and_its_next_spec(name, source, steps):
+    """checkpoints/imitator_amp_<name>: the last snapshot of continue_<source>.yaml from <source> (seed 0);
+    continue_<name>.yaml is the same recipe from <name>."""
+    data, embedded = _checkpoint(f"imitator_amp_{name}")
     plugins = get_plugins()
-    recipe = load_spec(ROOT / "specs" / "imitator" / "continue_v18.yaml", plugins).spec
+    recipe = load_spec(ROOT / "specs" / "imitator" / f"continue_{source}.yaml", plugins).spec
     assert embedded["name"] == recipe.name and embedded["seed"] == 0
     assert embedded["motions"]["params"]["velocities"] == "central_smoothed"
-    assert embedded["imitator"]["trainer"]["params"]["init_policy"] == "../imitator_amp_v18/policy.pt"
-    assert data["extra"]["env_steps"] == 6012928
-    nxt = load_spec(ROOT / "specs" / "imitator" / "continue_v19.yaml", plugins).spec
+    assert embedded["imitator"]["trainer"]["params"]["init_policy"] == f"../imitator_amp_{source}/policy.pt"
+    assert data["extra"]["env_steps"] == steps
+    nxt = load_spec(ROOT / "specs" / "imitator" / f"continue_{name}.yaml", plugins).spec
     assert nxt.motions == recipe.motions and nxt.humanoid == recipe.humanoid and nxt.imitator.params == recipe.imitator.params
     a, b = nxt.imitator.trainer.params, recipe.imitator.trainer.params
-    assert Path(a["init_policy"]).resolve() == (ROOT / "checkpoints" / "imitator_amp_v19" / "policy.pt").resolve()
+    assert Path(a["init_policy"]).resolve() == (ROOT / "checkpoints" / f"imitator_amp_{name}" / "policy.pt").resolve()
     assert {k: v for k, v in a.items() if k != "init_policy"} == {k: v for k, v in b.items() if k != "init_policy"}

@@ -48,7 +48,11 @@ def test_reproduce_spec_trains_everything_and_shares_the_imitator():
     covered |= {"imitator_amp_v13", "imitator_amp_v14"}  # _v12 and _v13 continued by continue_v12/_v13.yaml (tested below)
     covered |= {"imitator_amp_v16"}  # _v15 continued by continue_v15.yaml (tests/test_reproduce_continued.py)
     covered |= {"imitator_amp_v17"}  # _v16 continued by continue_v16.yaml + desired_kl 0.003 (tests/test_reproduce_continued.py)
-    covered |= {"imitator_amp_v18", "imitator_amp_v19"}  # _v17 continued by continue_v17_vel.yaml, then continue_v18.yaml (tests/test_reproduce_continued.py)
+    covered |= {
+        "imitator_amp_v18",
+        "imitator_amp_v19",
+        "imitator_amp_v20",
+    }  # _v17 by continue_v17_vel.yaml, then continue_v18/_v19.yaml (tests/test_reproduce_continued.py)
     covered |= {"imitator_amp_v15"}  # _v14 continued by continue_v14.yaml with PHC's fixed sigma (tested below)
     covered |= {"pulse_amp_v15", "hybrid_rvq_amp_v15"}  # the v7 latent recipes from _v15 with longer budgets (tested below)
     covered |= {
