@@ -31,7 +31,7 @@ Consumer-side velocities (``velocities``, default: the policy's own motion setti
 velocities the policy observes are derived from the delivered frames by the motion library, with
 forward differences or PHC's code's Gaussian-smoothed central differences
 (:class:`~mocap.motion.sources.ReferenceVelocityParams`). Forward differences turn 1 cm of root
-jitter at 30 fps into ~0.4 m/s of velocity noise; ``central_smoothed`` reads about 3 ``velocity_sigma``
+jitter at 30 fps into ~0.4 m/s of velocity noise per axis; ``central_smoothed`` reads about 3 ``velocity_sigma``
 frames ahead of each frame (offline clips have them; a live stream pays them as latency).
 
 Protocol (:func:`evaluate_noisy`): for each level, the same imitation protocol as ``mocap eval``
