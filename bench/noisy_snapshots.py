@@ -6,9 +6,9 @@ wrote). For every snapshot this runs ``mocap eval-noisy SNAPSHOT --levels L --se
 seed (separate processes, one thread each) and records the clips tracked and MPJPE-g, next to the
 clean numbers. A ``--checkpoint LABEL=PATH`` is an arm of one point (a committed policy). With
 ``--smooth a1,a2`` every point is also evaluated on the stream after `mocap eval-noisy --smooth a` (a
-causal exponential filter; 1 = the raw stream). Output: JSON with every value and the command, and a PNG (clips tracked on the noisy
-stream and on the clean clips against env steps, one line per arm and smoothing, the noise seeds' mean with their
-min-max as a band).
+causal exponential filter; 1 = the raw stream). Output: JSON with every value and the command, and a PNG
+(clips tracked on the noisy stream and on the clean clips against env steps, one line per arm and
+smoothing, the noise seeds' mean with their min-max as a band).
 
     python bench/noisy_snapshots.py --arm control=/work/runs/v18 --arm noise=/work/runs/v18_noise \\
         --checkpoint v17=checkpoints/imitator_amp_v17/policy.pt --level 1 --seeds 0,1,2 --smooth 1,0.8 \\
@@ -129,7 +129,12 @@ def main(argv: list[str] | None = None) -> int:
         plot(json.loads(args.replot.read_text()), args.out.with_suffix(".png"))
         print(f"wrote {args.out.with_suffix('.png')}")
         return 0
-    seeds = [int(s) for s in args.seeds.split(",") if s.strip()]
+    try:
+        seeds = [int(s) for s in args.seeds.split(",") if s.strip()]
+    except ValueError:
+        raise SystemExit(f"error: --seeds {args.seeds!r}: expected integers, comma-separated") from None
+    if not seeds:
+        raise SystemExit("error: --seeds: give at least one noise seed")
 
     smooths = [float(a) for a in args.smooth.split(",") if a.strip()]
     if not smooths or any(not 0 < a <= 1 for a in smooths):

@@ -42,6 +42,10 @@ def test_an_arm_without_snapshots_is_one_error_line(ns, tmp_path):
         ns.main(["--arm", str(tmp_path), "--out", str(tmp_path / "x")])
     with pytest.raises(SystemExit, match="at least one --arm or --checkpoint"):
         ns.main(["--out", str(tmp_path / "x")])
+    with pytest.raises(SystemExit, match="at least one noise seed"):
+        ns.main(["--arm", f"a={tmp_path}", "--seeds", "", "--out", str(tmp_path / "x")])
+    with pytest.raises(SystemExit, match="expected integers"):
+        ns.main(["--arm", f"a={tmp_path}", "--seeds", "0,x", "--out", str(tmp_path / "x")])
     with pytest.raises(SystemExit, match="must be in"):
         ns.main(["--arm", f"a={tmp_path}", "--smooth", "1,0", "--out", str(tmp_path / "x")])
     with pytest.raises(SystemExit, match="missing.pt: not found"):
