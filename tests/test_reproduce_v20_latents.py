@@ -1,0 +1,60 @@
+"""The latent spaces distilled from ``checkpoints/imitator_amp_v20``: each stage-1 spec is its v15 recipe with
+the v20 teacher and the reference velocities v20 was trained on (nothing else differs), and each stage-2 spec
+continues its stage 1 exactly as the v15 continuation continued its own. Committed checkpoints embed them."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from mocap.plugins import get_plugins
+from mocap.spec import load_spec
+from test_reproduce_spec import _checkpoint
+
+ROOT = Path(__file__).resolve().parents[1]
+LATENT = ROOT / "specs" / "latent"
+
+# v20 stage 1, its v15 recipe; v20 stage 2, its v15 counterpart
+STAGES = [("pulse_amp_v20", "pulse_amp_v15", "pulse_amp_v20_beta", "pulse_amp_v15_beta"), ("hybrid_rvq_amp_v20", "hybrid_rvq_amp_v15", "hybrid_rvq_amp_v20_settle", "hybrid_rvq_amp_v15_settle")]
+
+
+def _spec(name: str):
+    return load_spec(LATENT / f"{name}.yaml", get_plugins()).spec
+
+
+@pytest.mark.parametrize(("name", "recipe", "_s2", "_r2"), STAGES)
+def test_a_v20_latent_is_its_v15_recipe_with_the_v20_teacher_and_its_velocities(name, recipe, _s2, _r2):
+    spec, base = _spec(name), _spec(recipe)
+    assert Path(spec.imitator.checkpoint).resolve() == (ROOT / "checkpoints" / "imitator_amp_v20" / "policy.pt").resolve()
+    assert spec.imitator.model_copy(update={"checkpoint": None}) == base.imitator.model_copy(update={"checkpoint": None})
+    teacher = _checkpoint("imitator_amp_v20")[1]["motions"]["params"]
+    motions = spec.motions.params
+    assert (motions["velocities"], motions["velocity_sigma"]) == (teacher["velocities"], teacher["velocity_sigma"]) == ("central_smoothed", 2.0)
+    assert base.motions.params.get("velocities", "forward") == "forward"  # the v15 teacher's rule
+    rest = {k: v for k, v in motions.items() if k not in ("velocities", "velocity_sigma")}
+    assert rest == {k: v for k, v in base.motions.params.items() if k not in ("velocities", "velocity_sigma")}
+    assert spec.latent == base.latent and spec.humanoid == base.humanoid and spec.simulator == base.simulator
+
+
+@pytest.mark.parametrize(("stage1", "_r1", "name", "counterpart"), STAGES)
+def test_a_v20_stage_two_continues_its_stage_one_as_v15_did(stage1, _r1, name, counterpart):
+    spec, base = _spec(name), _spec(counterpart)
+    params = spec.latent.trainer.params
+    assert Path(params["init_latent"]).resolve() == (ROOT / "checkpoints" / stage1 / "latent.pt").resolve()
+    a, b = spec.latent.model_dump(), base.latent.model_dump()
+    a["trainer"]["params"].pop("init_latent"), b["trainer"]["params"].pop("init_latent")
+    assert a == b  # the same rate decay, budget and held schedules
+    assert spec.imitator == _spec(stage1).imitator and spec.motions == _spec(stage1).motions
+
+
+@pytest.mark.parametrize(("name", "decoder"), [("speed_pulse", "pulse_amp_v20_beta"), ("speed_hybrid_rvq", "hybrid_rvq_amp_v20_settle")])
+def test_a_v20_task_spec_is_its_v15_one_through_the_v20_decoder(name, decoder):
+    plugins = get_plugins()
+    spec = load_spec(ROOT / "specs" / "tasks" / f"{name}_v20.yaml", plugins).spec
+    base = load_spec(ROOT / "specs" / "tasks" / f"{name}_v15.yaml", plugins).spec
+    assert Path(spec.latent.checkpoint).resolve() == (ROOT / "checkpoints" / decoder / "latent.pt").resolve()
+    assert Path(spec.imitator.checkpoint).resolve() == (ROOT / "checkpoints" / "imitator_amp_v20" / "policy.pt").resolve()
+    assert spec.latent.model_copy(update={"checkpoint": None}) == base.latent.model_copy(update={"checkpoint": None})
+    assert spec.task == base.task and spec.humanoid == base.humanoid and spec.simulator == base.simulator
+    assert spec.motions.params["velocities"] == "central_smoothed" and spec.motions.name == base.motions.name
