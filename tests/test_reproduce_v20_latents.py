@@ -58,3 +58,13 @@ def test_a_v20_task_spec_is_its_v15_one_through_the_v20_decoder(name, decoder):
     assert spec.latent.model_copy(update={"checkpoint": None}) == base.latent.model_copy(update={"checkpoint": None})
     assert spec.task == base.task and spec.humanoid == base.humanoid and spec.simulator == base.simulator
     assert spec.motions.params["velocities"] == "central_smoothed" and spec.motions.name == base.motions.name
+
+
+@pytest.mark.parametrize(("name", "steps", "start"), [("pulse_amp_v20", 10_000_384, None), ("hybrid_rvq_amp_v20", 8_001_536, None), ("pulse_amp_v20_beta", 4_001_792, "pulse_amp_v20"), ("hybrid_rvq_amp_v20_settle", 4_001_792, "hybrid_rvq_amp_v20")])
+def test_a_committed_v20_latent_embeds_its_spec_and_teacher(name, steps, start):
+    data, embedded = _checkpoint(name, "latent.pt")
+    assert embedded["name"] == _spec(name).name == name.replace("_", "-")
+    assert embedded["imitator"]["checkpoint"] == "../imitator_amp_v20/policy.pt"
+    assert embedded["motions"]["params"]["velocities"] == "central_smoothed"
+    assert embedded["latent"]["trainer"]["params"].get("init_latent") == (None if start is None else f"../{start}/latent.pt")
+    assert data["extra"]["metrics"]["env_steps"] == steps and data["extra"]["metrics"]["eval/total"] == 15
