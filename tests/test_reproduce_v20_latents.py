@@ -16,7 +16,10 @@ ROOT = Path(__file__).resolve().parents[1]
 LATENT = ROOT / "specs" / "latent"
 
 # v20 stage 1, its v15 recipe; v20 stage 2, its v15 counterpart
-STAGES = [("pulse_amp_v20", "pulse_amp_v15", "pulse_amp_v20_beta", "pulse_amp_v15_beta"), ("hybrid_rvq_amp_v20", "hybrid_rvq_amp_v15", "hybrid_rvq_amp_v20_settle", "hybrid_rvq_amp_v15_settle")]
+STAGES = [
+    ("pulse_amp_v20", "pulse_amp_v15", "pulse_amp_v20_beta", "pulse_amp_v15_beta"),
+    ("hybrid_rvq_amp_v20", "hybrid_rvq_amp_v15", "hybrid_rvq_amp_v20_settle", "hybrid_rvq_amp_v15_settle"),
+]
 
 
 def _spec(name: str):
@@ -60,7 +63,15 @@ def test_a_v20_task_spec_is_its_v15_one_through_the_v20_decoder(name, decoder):
     assert spec.motions.params["velocities"] == "central_smoothed" and spec.motions.name == base.motions.name
 
 
-@pytest.mark.parametrize(("name", "steps", "start"), [("pulse_amp_v20", 10_000_384, None), ("hybrid_rvq_amp_v20", 8_001_536, None), ("pulse_amp_v20_beta", 4_001_792, "pulse_amp_v20"), ("hybrid_rvq_amp_v20_settle", 4_001_792, "hybrid_rvq_amp_v20")])
+@pytest.mark.parametrize(
+    ("name", "steps", "start"),
+    [
+        ("pulse_amp_v20", 10_000_384, None),
+        ("hybrid_rvq_amp_v20", 8_001_536, None),
+        ("pulse_amp_v20_beta", 4_001_792, "pulse_amp_v20"),
+        ("hybrid_rvq_amp_v20_settle", 4_001_792, "hybrid_rvq_amp_v20"),
+    ],
+)
 def test_a_committed_v20_latent_embeds_its_spec_and_teacher(name, steps, start):
     data, embedded = _checkpoint(name, "latent.pt")
     assert embedded["name"] == _spec(name).name == name.replace("_", "-")
@@ -68,3 +79,12 @@ def test_a_committed_v20_latent_embeds_its_spec_and_teacher(name, steps, start):
     assert embedded["motions"]["params"]["velocities"] == "central_smoothed"
     assert embedded["latent"]["trainer"]["params"].get("init_latent") == (None if start is None else f"../{start}/latent.pt")
     assert data["extra"]["metrics"]["env_steps"] == steps and data["extra"]["metrics"]["eval/total"] == 15
+
+
+def test_speed_through_pulse_stage_one_differs_from_speed_pulse_v20_by_the_decoder_only():
+    plugins = get_plugins()
+    spec = load_spec(ROOT / "specs" / "tasks" / "speed_pulse_v20_stage1.yaml", plugins).spec
+    base = load_spec(ROOT / "specs" / "tasks" / "speed_pulse_v20.yaml", plugins).spec
+    assert Path(spec.latent.checkpoint).resolve() == (ROOT / "checkpoints" / "pulse_amp_v20" / "latent.pt").resolve()
+    assert spec.latent.model_copy(update={"checkpoint": None}) == base.latent.model_copy(update={"checkpoint": None})
+    assert spec.task == base.task and spec.imitator == base.imitator and spec.motions == base.motions
