@@ -88,3 +88,21 @@ def test_speed_through_pulse_stage_one_differs_from_speed_pulse_v20_by_the_decod
     assert Path(spec.latent.checkpoint).resolve() == (ROOT / "checkpoints" / "pulse_amp_v20" / "latent.pt").resolve()
     assert spec.latent.model_copy(update={"checkpoint": None}) == base.latent.model_copy(update={"checkpoint": None})
     assert spec.task == base.task and spec.imitator == base.imitator and spec.motions == base.motions
+
+
+# committed task policies through the v20 latent spaces: (checkpoint = spec name, decoder)
+V20_TASK_POLICIES = [("speed_pulse_v20", "pulse_amp_v20_beta"), ("speed_hybrid_rvq_v20", "hybrid_rvq_amp_v20_settle")]
+
+
+@pytest.mark.parametrize(("name", "decoder"), V20_TASK_POLICIES)
+def test_a_v20_task_policy_was_trained_by_its_spec_for_8m_steps(name, decoder):
+    spec = load_spec(ROOT / "specs" / "tasks" / f"{name}.yaml", get_plugins()).spec
+    _, embedded = _checkpoint(name, "task_policy.pt")
+    params = embedded["task"]["trainer"]["params"]
+    assert embedded["name"] == spec.name and embedded["task"]["name"] == spec.task.name
+    assert params["total_env_steps"] == 8_000_000 and embedded["simulator"]["params"]["threads"] == 1
+    expected = dict(spec.task.trainer.params)
+    expected.pop("total_env_steps")
+    assert all(params[k] == (list(v) if isinstance(v, tuple) else v) for k, v in expected.items())
+    assert embedded["latent"]["checkpoint"] == f"../{decoder}/latent.pt"
+    assert embedded["imitator"]["checkpoint"] == "../imitator_amp_v20/policy.pt"
