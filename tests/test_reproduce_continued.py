@@ -54,13 +54,21 @@ def test_a_settled_checkpoint_embeds_its_spec_and_starts_from_its_source(name, s
     assert data["extra"]["metrics"]["env_steps"] == 4001792 and data["extra"]["metrics"]["eval/total"] == 15
 
 
-def test_speed_through_the_beta_decoder_differs_from_speed_pulse_v15_by_the_decoder_only():
+# a speed spec, the speed spec it differs from by the PULSE decoder only, that decoder
+DECODER_ARMS = [
+    ("speed_pulse_v15_beta", "speed_pulse_v15", "pulse_amp_v15_beta"),
+    ("speed_pulse_v20_stage1", "speed_pulse_v20", "pulse_amp_v20"),
+]
+
+
+@pytest.mark.parametrize(("name", "source", "decoder"), DECODER_ARMS)
+def test_a_speed_spec_through_another_decoder_differs_by_the_decoder_only(name, source, decoder):
     plugins = get_plugins()
-    spec = load_spec(ROOT / "specs" / "tasks" / "speed_pulse_v15_beta.yaml", plugins).spec
-    base = load_spec(ROOT / "specs" / "tasks" / "speed_pulse_v15.yaml", plugins).spec
-    assert Path(spec.latent.checkpoint).resolve() == (ROOT / "checkpoints" / "pulse_amp_v15_beta" / "latent.pt").resolve()
+    spec = load_spec(ROOT / "specs" / "tasks" / f"{name}.yaml", plugins).spec
+    base = load_spec(ROOT / "specs" / "tasks" / f"{source}.yaml", plugins).spec
+    assert Path(spec.latent.checkpoint).resolve() == (ROOT / "checkpoints" / decoder / "latent.pt").resolve()
     assert spec.latent.model_copy(update={"checkpoint": None}) == base.latent.model_copy(update={"checkpoint": None})
-    assert spec.task == base.task and spec.imitator == base.imitator and spec.humanoid == base.humanoid
+    assert spec.task == base.task and spec.imitator == base.imitator and spec.humanoid == base.humanoid and spec.motions == base.motions
 
 
 def test_pulse_amp_v15_beta_is_the_settle_continuation_with_beta_1e4():

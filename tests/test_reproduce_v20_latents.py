@@ -81,15 +81,6 @@ def test_a_committed_v20_latent_embeds_its_spec_and_teacher(name, steps, start):
     assert data["extra"]["metrics"]["env_steps"] == steps and data["extra"]["metrics"]["eval/total"] == 15
 
 
-def test_speed_through_pulse_stage_one_differs_from_speed_pulse_v20_by_the_decoder_only():
-    plugins = get_plugins()
-    spec = load_spec(ROOT / "specs" / "tasks" / "speed_pulse_v20_stage1.yaml", plugins).spec
-    base = load_spec(ROOT / "specs" / "tasks" / "speed_pulse_v20.yaml", plugins).spec
-    assert Path(spec.latent.checkpoint).resolve() == (ROOT / "checkpoints" / "pulse_amp_v20" / "latent.pt").resolve()
-    assert spec.latent.model_copy(update={"checkpoint": None}) == base.latent.model_copy(update={"checkpoint": None})
-    assert spec.task == base.task and spec.imitator == base.imitator and spec.motions == base.motions
-
-
 # committed task policies through the v20 latent spaces: (checkpoint = spec name, decoder)
 V20_TASK_POLICIES = [("speed_pulse_v20", "pulse_amp_v20_beta"), ("speed_hybrid_rvq_v20", "hybrid_rvq_amp_v20_settle")]
 
