@@ -81,5 +81,18 @@ class ActionMap:
             raise ValueError("residual actions need the next reference's DoF angles")
         return ref_dof_pos.to(a) + a
 
+    def inverse(self, targets: Tensor, ref_dof_pos: Tensor | None) -> Tensor:
+        """The action whose PD targets are ``targets`` (``a = (q - offset) / scale`` or ``q - q^``),
+        clamped to ``[-clip, clip]``: ``self(self.inverse(q, r), r) == q`` wherever that action lies
+        within the clip (a distillation label in this map's action space)."""
+        q = targets.float() if not targets.is_floating_point() else targets
+        if self.mode == "absolute":
+            a = (q - self.offset.to(q)) / self.scale.to(q)
+        elif ref_dof_pos is None:
+            raise ValueError("residual actions need the next reference's DoF angles")
+        else:
+            a = q - ref_dof_pos.to(q)
+        return a if self.clip is None else a.clamp(-self.clip, self.clip)
+
 
 __all__ = ["ActionMap", "pd_offset_scale"]

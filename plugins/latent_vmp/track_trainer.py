@@ -7,7 +7,10 @@ not see the VAE. This trainer, run on the spec's ``latent: {name: vmp}`` stage, 
    params ``vae``) on a sub-context whose workdir is that folder; skipped once ``vae/vae.pt``
    exists (its own ``vmp.pt`` resumes an interrupted VAE run). Metrics go to ``metrics.jsonl``
    under the stage name ``latent/vae``; its reconstruction table is published with the stage.
-2. **Stage II** in ``<workdir>/tracker``: PPO (:class:`~mocap.rl.ppo.PPOTrainer`, params ``ppo``)
+2. **Stage II**, optionally warm-started (params ``distill``; :mod:`mocap_vmp.tracker_distill`) by
+   distilling the spec's trained imitator into the tracking policy in ``<workdir>/tracker_distill``
+   (its ``distill.pt`` resumes it; its ``policy.pt`` is PPO's ``init_policy``), then in
+   ``<workdir>/tracker``: PPO (:class:`~mocap.rl.ppo.PPOTrainer`, params ``ppo``)
    on :class:`~mocap_vmp.tracking.VmpTrackingEnv` (params ``tracker``) built with the trained VAE;
    PPO's ``ppo.pt`` resumes it exactly. Metrics under the stage name ``latent/tracker``.
 3. ``<workdir>/vmp.pt``: the VAE exactly as stage 1's ``vae.pt`` holds it (format, ``latent``,
@@ -27,7 +30,8 @@ from typing import Any
 
 from mocap import trainer_scaffold as scaffold
 from mocap.checkpoint import load_checkpoint, save_checkpoint
-from mocap.interfaces import StageResult, Trainer
+from mocap.interfaces import Imitator, StageResult, Trainer
+from mocap.pipeline import StageFailed
 from mocap.rl.ppo import PPOTrainer
 from mocap_vmp.tracking import TRACKER_KEY, VmpTracker
 from mocap_vmp.trainer import FINAL_NAME, SupervisedTrainer
@@ -37,6 +41,8 @@ FORMAT = "mocap_vmp.vmp/1"
 COMBINED_NAME = "vmp.pt"
 VAE_DIR = "vae"
 TRACKER_DIR = "tracker"
+DISTILL_DIR = "tracker_distill"
+DISTILL_EVAL = "eval.json"
 
 
 class VmpTrackTrainer(Trainer):
@@ -77,9 +83,17 @@ class VmpTrackTrainer(Trainer):
 
         # --------------------------------------------------------- stage II: the tracking policy
         tracker = VmpTracker(p.tracker, ctx.skeleton, latent=latent)
+        ppo_params = p.ppo
+        if p.distill is not None and not (workdir / TRACKER_DIR / "ppo.pt").is_file():
+            distilled = self._distill(ctx, p, latent, workdir / DISTILL_DIR)
+            if distilled is None:  # stopped (Ctrl-C): its distill.pt resumes it
+                return StageResult(checkpoint=workdir / DISTILL_DIR / "distill.pt", metrics={})
+            ppo_params = ppo_params.model_copy(update={"init_policy": distilled})
+        elif p.distill is not None:
+            ppo_params = ppo_params.model_copy(update={"init_policy": workdir / DISTILL_DIR / "policy.pt"})
         sub = ctx.phase("tracker", workdir=workdir / TRACKER_DIR, env_factory=lambda n: tracker.make_env(ctx, n))
         try:
-            res = PPOTrainer(p.ppo).run(sub)
+            res = PPOTrainer(ppo_params).run(sub)
         finally:
             sub.log.close()
         if ctx.should_stop() or res.checkpoint is None or Path(res.checkpoint).name != "policy.pt":
@@ -105,6 +119,51 @@ class VmpTrackTrainer(Trainer):
         )
         save_checkpoint(combined, payload, spec_yaml=ctx.spec_yaml())
         return StageResult(checkpoint=combined, metrics=metrics)
+
+    @staticmethod
+    def _distill(ctx: Any, p: VmpTrackParams, latent: Any, workdir: Path) -> Path | None:
+        """The DAgger warm start (:mod:`mocap_vmp.tracker_distill`): ``<workdir>/policy.pt``, or None when stopped."""
+        from mocap_vmp.tracker_distill import TrackerDistiller
+
+        assert p.distill is not None
+        upstream = ctx.upstream.get("imitator")
+        try:
+            teacher = ctx.stage_component("imitator", checkpoint=upstream.checkpoint if upstream else None)
+        except KeyError:
+            raise StageFailed(
+                "vmp_track distill: the warm start needs a teacher: add an `imitator:` section (a trained imitator or its checkpoint) to the spec"
+            ) from None
+        if not isinstance(teacher, Imitator):
+            raise StageFailed(f"vmp_track distill: the imitator stage gives a {type(teacher).__name__}, not a trained imitator")
+        # the teacher's goal is the reference's global pose: no jumps to another clip's frame (module docstring)
+        tracker = VmpTracker(p.tracker.model_copy(update={"reference_jump": False}), ctx.skeleton, latent=latent)
+        sub = ctx.phase("tracker_distill", workdir=workdir)
+        env = tracker.make_env(ctx, p.distill.num_envs)
+        try:
+            model = PPOTrainer(p.ppo).build_model(env.obs_dim, env.action_space)
+            policy_path = TrackerDistiller(p.distill, p.ppo.gamma, p.ppo.gae_lambda).run(sub, env, teacher, model)
+            if policy_path is not None and not (workdir / DISTILL_EVAL).is_file():
+                _evaluate_distilled(ctx, p, latent, env.library, policy_path, workdir / DISTILL_EVAL)
+            return policy_path
+        finally:
+            env.close()
+            sub.log.close()
+
+
+def _evaluate_distilled(ctx: Any, p: VmpTrackParams, latent: Any, library: Any, policy_path: Path, out: Path) -> None:
+    """The distilled policy (before PPO) under the imitation protocol: ``out`` (JSON) and one console line."""
+    import json
+
+    from mocap.evaluation import ImitationEvalParams
+    from mocap.imitation_eval import evaluate_imitator
+    from mocap.rl.networks import load_policy
+    from mocap_vmp.tracking import VmpImitator
+
+    imitator = VmpImitator(p.tracker, ctx.skeleton, latent, load_policy(policy_path), library)
+    table = evaluate_imitator(imitator, library, lambda n: ctx.build("simulator", skeleton=ctx.skeleton, num_envs=n, seed=ctx.seed), ImitationEvalParams())
+    out.write_text(json.dumps(table, indent=1, default=float) + "\n", encoding="utf-8")
+    agg = table["aggregate"]
+    ctx.console.print(f"tracker distill: the distilled policy (before PPO) tracks {agg['succeeded']}/{agg['total']} clips; {out}")
 
 
 __all__ = ["VmpTrackParams", "VmpTrackTrainer"]

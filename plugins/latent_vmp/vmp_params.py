@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from mocap.rl.ppo_params import PPOParams
 from mocap_vmp.tracking_params import VmpTrackerParams
@@ -71,6 +71,44 @@ class SupervisedParams(BaseModel):
     latent_batch: int = Field(1024, ge=1, description="windows per batch when precomputing the per-frame latents")
 
 
+class TrackerDistillParams(BaseModel):
+    """Warm start of the tracking policy by online distillation (DAgger) from the spec's trained
+    imitator, before PPO [X: not in VMP, whose tracker is trained by RL alone; :mod:`mocap_vmp.tracker_distill`]."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    total_env_steps: int = Field(5_000_000, ge=1, description="distillation budget in env steps (rounded up to whole iterations)")
+    num_envs: int = Field(128, ge=1, description="parallel envs")
+    horizon: int = Field(32, ge=1, description="steps per env per iteration")
+    epochs: int = Field(2, ge=1, description="passes over each iteration's samples")
+    minibatch_size: int = Field(1024, ge=1, description="samples per gradient step")
+    lr: float = Field(5e-4, gt=0, description="Adam learning rate (PULSE's distillation: 5e-4)")
+    lr_end: float = Field(5e-5, gt=0, description="the learning rate decays linearly to this at the end of the budget")
+    beta: tuple[float, float] = Field(
+        (0.5, 0.0),
+        description="DAgger's beta_i: each env step is driven by the teacher's action with this probability, else by the "
+        "student's mean action; annealed linearly from the first value to the second over the budget",
+    )
+    value_coef: float = Field(
+        0.5,
+        ge=0,
+        description="weight of a critic fit to TD(lambda) returns of the tracking reward on the same samples (gamma and "
+        "lambda of the ppo params), so that PPO starts with a critic that knows the distilled policy; 0 = off",
+    )
+    max_grad_norm: float = Field(1.0, gt=0, description="global gradient-norm clip")
+    torch_threads: int | None = Field(1, ge=1, description="torch intra-op threads (None: keep the process setting)")
+    checkpoint_every: int = Field(20, ge=1, description="iterations between resumable checkpoints (also at the end and on Ctrl-C)")
+    print_every: int = Field(10, ge=1, description="iterations between progress lines when the console is not a terminal")
+
+    @model_validator(mode="after")
+    def _valid(self) -> "TrackerDistillParams":
+        if not all(0.0 <= b <= 1.0 for b in self.beta):
+            raise ValueError(f"beta values must lie in [0, 1], got {self.beta}")
+        if self.minibatch_size > self.num_envs * self.horizon:
+            raise ValueError(f"minibatch_size {self.minibatch_size} exceeds num_envs x horizon = {self.num_envs * self.horizon}")
+        return self
+
+
 class VmpTrackParams(BaseModel):
     """Both VMP stages: the VAE's training (``vae``), PPO (``ppo``) and the tracking env (``tracker``)."""
 
@@ -89,6 +127,11 @@ class VmpTrackParams(BaseModel):
         default_factory=VmpTrackerParams,
         description="stage II: conditioning, reward, termination, episodes",
     )
+    distill: TrackerDistillParams | None = Field(
+        None,
+        description="stage II warm start: distil the spec's imitator into the tracking policy before PPO [X]; "
+        "None = PPO from random weights (the paper's procedure)",
+    )
 
 
-__all__ = ["SupervisedParams", "VmpParams", "VmpTrackParams"]
+__all__ = ["SupervisedParams", "TrackerDistillParams", "VmpParams", "VmpTrackParams"]
