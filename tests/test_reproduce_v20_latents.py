@@ -97,3 +97,20 @@ def test_a_v20_task_policy_was_trained_by_its_spec_for_8m_steps(name, decoder):
     assert all(params[k] == (list(v) if isinstance(v, tuple) else v) for k, v in expected.items())
     assert embedded["latent"]["checkpoint"] == f"../{decoder}/latent.pt"
     assert embedded["imitator"]["checkpoint"] == "../imitator_amp_v20/policy.pt"
+
+
+def test_the_v20_vmp_spec_is_vmp_amp_on_the_teachers_humanoid_with_a_distilled_start():
+    spec, base = _spec("vmp_amp_v20"), _spec("vmp_amp")
+    teacher = _checkpoint("imitator_amp_v20")[1]
+    assert Path(spec.imitator.checkpoint).resolve() == (ROOT / "checkpoints" / "imitator_amp_v20" / "policy.pt").resolve()
+    for key in ("shoulder_turns", "shoulder_order"):
+        assert spec.humanoid.params[key] == teacher["humanoid"]["params"][key]
+    for key in ("velocities", "velocity_sigma"):
+        assert spec.motions.params[key] == teacher["motions"]["params"][key]
+    assert spec.imitator.params["action"] == teacher["imitator"]["params"]["action"] == "residual"
+    assert spec.latent.params == base.latent.params and spec.simulator == base.simulator
+    mine, theirs = spec.latent.trainer.params, base.latent.trainer.params
+    assert mine["vae"] == theirs["vae"] and mine["tracker"] == theirs["tracker"] and theirs["distill"] is None
+    assert mine["distill"]["total_env_steps"] > 0
+    changed = {k for k in set(mine["ppo"]) | set(theirs["ppo"]) if mine["ppo"].get(k) != theirs["ppo"].get(k)}
+    assert changed == {"total_env_steps", "log_std_init", "learn_std", "desired_kl"}

@@ -488,7 +488,10 @@ def test_imitator_observation_matches_the_env(amp, lib, latent):
     for mode in ("M5", "LM"):
         env = _env(amp, lib, latent, n=3, conditioning=mode)
         env.reset()
-        imitator = VmpImitator(env.params, amp, latent, lambda x: torch.zeros(x.shape[0], amp.num_dofs), lib, dt=env.dt)
+        from mocap.rl.networks import ActorCritic
+
+        policy = ActorCritic(env.obs_dim, env.action_space, actor_hidden=[8], critic_hidden=[8])
+        imitator = VmpImitator(env.params, amp, latent, policy, lib, dt=env.dt)
         assert imitator.obs_dim == env.obs_dim
         obs = imitator.observe(env.sim.state, clip_frames(lib, env.clip_ids, env.target_time))
         torch.testing.assert_close(torch.cat((obs.proprio, obs.goal), -1), env.current_obs(), atol=1e-5, rtol=1e-5)

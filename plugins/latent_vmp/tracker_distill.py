@@ -243,12 +243,12 @@ class TrackerDistiller:
             perm = torch.randperm(T * N, generator=gen)
             for start in range(0, T * N - p.minibatch_size + 1, p.minibatch_size):
                 idx = perm[start : start + p.minibatch_size]
-                out = model.train_forward(flat_obs[idx], labels[idx])
-                assert out.mean is not None  # a Box action space (the tracker's)
-                a_loss = (out.mean - labels[idx]).square().mean()
+                fwd = model.train_forward(flat_obs[idx], labels[idx])
+                assert fwd.mean is not None  # a Box action space (the tracker's)
+                a_loss = (fwd.mean - labels[idx]).square().mean()
                 loss = a_loss
                 if returns is not None:
-                    v = model.denormalize_value(out.value_raw)
+                    v = model.denormalize_value(fwd.value_raw)
                     v_loss = (v - returns[idx]).square().mean()
                     loss = loss + p.value_coef * v_loss
                     v_sum += float(v_loss.detach())

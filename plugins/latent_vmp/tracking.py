@@ -106,6 +106,7 @@ from torch import Tensor
 
 from mocap.interfaces import Imitator
 from mocap.observations import proprioception, proprioception_dim
+from mocap.rl.networks import ActorCritic
 from mocap.skeleton import Skeleton
 from mocap.state import MotionFrames, Observations, SimState
 from mocap_vmp.tracking_conditioning import VmpConditioning, _action_map, _clean, clip_frames, hold_action
@@ -198,7 +199,7 @@ class VmpImitator(Imitator):
         params: VmpTrackerParams,
         skeleton: Skeleton,
         latent: Any,
-        policy: Any,
+        policy: ActorCritic,
         library: Any,
         device: Any = "cpu",
         dt: float | None = None,
@@ -254,10 +255,7 @@ class VmpImitator(Imitator):
         assert obs.goal is not None
         x = torch.cat((obs.proprio, obs.goal), -1).to(self.device)
         with torch.no_grad():
-            if deterministic or not hasattr(self.policy, "act"):
-                out = self.policy.mean_action(x) if hasattr(self.policy, "mean_action") else self.policy(x)
-            else:
-                out = self.policy.act(x)[0]
+            out = self.policy.mean_action(x) if deterministic else self.policy.act(x)[0]
         return out.to(obs.proprio.device)
 
     def to_pd_targets(self, obs: Observations, output: Tensor) -> Tensor:
@@ -282,7 +280,6 @@ TRACKER_KEY = "tracker"
 def load_vmp_file(path: str | Path, skeleton: Skeleton, device: Any = "cpu") -> tuple[Any, Any, VmpTrackerParams]:
     """(VmpLatent, ActorCritic, VmpTrackerParams) from a combined ``vmp.pt`` of the ``vmp_track`` trainer."""
     from mocap.checkpoint import load_checkpoint
-    from mocap.rl.networks import ActorCritic
     from mocap_vmp.latent import VmpParams, make_vmp
 
     data = load_checkpoint(Path(path), map_location="cpu")
