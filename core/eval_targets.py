@@ -46,6 +46,7 @@ class LoadedTarget:
     label: str  # what the latent's decoder outputs: "policy_output" (teacher's raw output) or "pd_targets"
     policy: Imitator  # what imitation evaluation rolls out
     make_sim: Callable[[int], Simulator]
+    own_tracker: bool = False  # ``policy`` is the latent's own tracking policy (VMP); ``imitator`` is then the spec's, when it names one
 
     def to_pd_targets(self, obs: Any, output: torch.Tensor) -> torch.Tensor:
         """PD targets from a latent decoder's output (identity for ``label: pd_targets``)."""
@@ -278,7 +279,12 @@ def build_evaluation_target(target: EvalTarget, plugins: Any, *, motions: str | 
         own = latent.as_imitator(lib, dt=dt, device=device)
         if own is None:
             raise UserError(f"{target.latent_checkpoint}: the {spec.latent.name} latent has no imitator of its own and the spec names none")
-        return LoadedTarget(target, skeleton, lib, own, latent, "pd_targets", own, make_sim)
+        teacher: Imitator = own
+        if spec.imitator is not None and target.imitator_checkpoint is not None:  # the imitator it was distilled from (VMP's warm start)
+            teacher = plugins.get("imitator", spec.imitator.name).build(
+                resolved.params.get("imitator"), skeleton=skeleton, checkpoint=target.imitator_checkpoint, device=device
+            )
+        return LoadedTarget(target, skeleton, lib, teacher, latent, "pd_targets", own, make_sim, own_tracker=True)
     imitator = plugins.get("imitator", spec.imitator.name).build(
         resolved.params.get("imitator"), skeleton=skeleton, checkpoint=target.imitator_checkpoint, device=device
     )

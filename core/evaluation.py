@@ -175,7 +175,7 @@ def register_commands(app):  # type: ignore[no-untyped-def]
         target_info = load_evaluation_target(target, plugins)
         loaded = build_evaluation_target(target_info, plugins, motions=motions, use_latent=not imitator_only)
         spec, lib, imitator, make_sim = target_info.spec, loaded.library, loaded.policy, loaded.make_sim
-        if spec.imitator is None:
+        if loaded.own_tracker:
             what = f"{spec.latent.name} (its own tracking policy)"
         else:
             what = f"{spec.latent.name} latent (z = encoder mean)" if loaded.latent is not None else spec.imitator.name
@@ -198,7 +198,7 @@ def register_commands(app):  # type: ignore[no-untyped-def]
         stdout = Console(width=None if sys.stdout.isatty() else 160)
         stdout.print(out)
         stdout.print(f"success rate {100 * agg['success_rate']:.1f}% ({agg['succeeded']}/{agg['total']}); {PROTOCOL}")
-        if loaded.latent is not None and spec.imitator is not None:
+        if loaded.latent is not None and spec.imitator is not None and loaded.imitator is not loaded.policy:
             # PULSE Table 1 layout: the latent next to the imitator it was distilled from.
             teacher = evaluate_imitator(loaded.imitator, lib, make_sim, params, default_metrics(), console)
             table["imitator"] = teacher

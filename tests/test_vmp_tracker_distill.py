@@ -286,3 +286,20 @@ def test_distill_without_a_teacher_is_one_error_line(tmp_path):
     assert result.exit_code != 0
     text = result.output + result.stderr
     assert "Traceback" not in text and "needs a teacher" in text
+
+
+def test_eval_of_a_distilled_vmp_tracker_compares_it_with_its_teacher_not_with_itself():
+    """`mocap eval checkpoints/vmp_amp_v20` printed the VMP tracker's numbers twice, once labelled as the
+    teacher: for a latent with its own tracker the spec's imitator is now the teacher it is compared with."""
+    from pathlib import Path
+
+    from mocap.eval_targets import build_evaluation_target, load_evaluation_target
+    from mocap.plugins import get_plugins
+    from mocap_phc.imitator import PHCImitator
+    from mocap_vmp.tracking import VmpImitator
+
+    plugins = get_plugins()
+    target = load_evaluation_target(Path(__file__).resolve().parents[1] / "checkpoints" / "vmp_amp_v20", plugins)
+    loaded = build_evaluation_target(target, plugins)
+    assert loaded.own_tracker and isinstance(loaded.policy, VmpImitator)
+    assert isinstance(loaded.imitator, PHCImitator) and loaded.imitator is not loaded.policy
