@@ -114,3 +114,12 @@ def test_the_v20_vmp_spec_is_vmp_amp_on_the_teachers_humanoid_with_a_distilled_s
     assert mine["distill"]["total_env_steps"] > 0
     changed = {k for k in set(mine["ppo"]) | set(theirs["ppo"]) if mine["ppo"].get(k) != theirs["ppo"].get(k)}
     assert changed == {"total_env_steps", "log_std_init", "learn_std", "desired_kl"}
+
+
+def test_the_committed_v20_vmp_embeds_its_spec_teacher_and_budgets():
+    data, embedded = _checkpoint("vmp_amp_v20", "latent.pt")
+    assert embedded["name"] == _spec("vmp_amp_v20").name == "vmp-amp-v20"
+    assert embedded["imitator"]["checkpoint"] == "../imitator_amp_v20/policy.pt"
+    params = embedded["latent"]["trainer"]["params"]
+    assert params["distill"]["total_env_steps"] == 6_000_000 and params["tracker"]["conditioning"] == "LM"
+    assert data["tracker"]["metrics"]["env_steps"] == 2_007_040  # PPO after the distillation (8192-step iterations)

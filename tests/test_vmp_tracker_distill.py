@@ -275,6 +275,10 @@ def test_mocap_run_distills_the_imitator_into_the_tracker_before_ppo(tmp_path):
     stages = [json.loads(x)["stage"] for x in (out / "metrics.jsonl").read_text().splitlines()]
     assert stages.count("latent/tracker_distill") == 2 and stages.count("latent/tracker") == 1  # 16 / (2 x 4), 8 / (2 x 4)
     assert "ppo: starting from" in result.output and "tracker_distill" in result.output
+    import torch
+
+    data = torch.load(stage / "vmp.pt", weights_only=False)
+    assert data["metrics"]["distill/env_steps"] == 16.0 and "distill/loss/action" in data["metrics"]
 
 
 def test_distill_without_a_teacher_is_one_error_line(tmp_path):

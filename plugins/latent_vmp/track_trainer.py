@@ -104,6 +104,10 @@ class VmpTrackTrainer(Trainer):
             **{f"vae/{k}": float(v) for k, v in (vae_data.get("metrics") or {}).items()},
             **{f"tracker/{k}": float(v) for k, v in res.metrics.items()},
         }
+        distilled = workdir / DISTILL_DIR / "policy.pt"
+        if p.distill is not None and distilled.is_file():  # the warm start's last statistics and budget
+            extra = load_checkpoint(distilled).get("extra") or {}
+            metrics.update({f"distill/{k}": float(v) for k, v in (extra.get("metrics") or {}).items()})
         payload = {k: v for k, v in vae_data.items() if k not in ("versions", "spec")}
         payload.update(
             {

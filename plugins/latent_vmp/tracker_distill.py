@@ -183,7 +183,8 @@ class TrackerDistiller:
                     return None
         finally:
             progress.close()
-        save_policy(policy_path, model, extra={"trainer": "vmp_tracker_distill", "metrics": log}, spec_yaml=ctx.spec_yaml())
+        summary = {**log, "env_steps": float(env_steps), "iterations": float(iteration)}
+        save_policy(policy_path, model, extra={"trainer": "vmp_tracker_distill", "metrics": summary}, spec_yaml=ctx.spec_yaml())
         return policy_path
 
     # ------------------------------------------------------------------------------ rollout
