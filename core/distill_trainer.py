@@ -40,7 +40,8 @@ Hybrid-RVQ, a third-party one); the trainer knows nothing of their internals. PU
   (:class:`~mocap.latent_imitator.LatentImitator`, ``z`` = encoder mean) through
   :func:`mocap.imitation_eval.evaluate_imitator`; logs ``eval/success_rate``, ``eval/mpjpe_g``, ...
 
-Optional student methods, used when present: ``init_from_teacher(teacher)`` before training
+Student hooks, declared on :class:`~mocap.interfaces.LatentSpace` with do-nothing defaults that a
+latent space overrides: ``init_from_teacher(teacher)`` before training
 starts (e.g. to copy the teacher's input statistics), ``update_normalizers(obs)`` with each chunk
 before the update, ``config`` (a dict saved with the weights), and ``rl_hook()`` for an RL term
 (``None`` = off; PULSE's Table 3 ablation, :mod:`mocap_pulse.rl_term`): with a hook, the student
