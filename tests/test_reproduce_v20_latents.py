@@ -116,10 +116,20 @@ def test_the_v20_vmp_spec_is_vmp_amp_on_the_teachers_humanoid_with_a_distilled_s
     assert changed == {"total_env_steps", "log_std_init", "learn_std", "desired_kl"}
 
 
-def test_the_committed_v20_vmp_embeds_its_spec_teacher_and_budgets():
-    data, embedded = _checkpoint("vmp_amp_v20", "latent.pt")
-    assert embedded["name"] == _spec("vmp_amp_v20").name == "vmp-amp-v20"
+@pytest.mark.parametrize(("name", "conditioning"), [("vmp_amp_v20", "LM"), ("vmp_amp_v20_m", "M")])
+def test_the_committed_v20_vmp_embeds_its_spec_teacher_and_budgets(name, conditioning):
+    data, embedded = _checkpoint(name, "latent.pt")
+    assert embedded["name"] == _spec(name).name == name.replace("_", "-")
     assert embedded["imitator"]["checkpoint"] == "../imitator_amp_v20/policy.pt"
     params = embedded["latent"]["trainer"]["params"]
-    assert params["distill"]["total_env_steps"] == 6_000_000 and params["tracker"]["conditioning"] == "LM"
+    assert params["distill"]["total_env_steps"] == 6_000_000 and params["tracker"]["conditioning"] == conditioning
     assert data["tracker"]["metrics"]["env_steps"] == 2_007_040  # PPO after the distillation (8192-step iterations)
+
+
+def test_the_v20_vmp_m_ablation_differs_from_lm_by_the_conditioning_only():
+    lm, m = _spec("vmp_amp_v20").model_dump(), _spec("vmp_amp_v20_m").model_dump()
+    assert m["latent"]["trainer"]["params"]["tracker"].pop("conditioning") == "M"
+    assert lm["latent"]["trainer"]["params"]["tracker"].pop("conditioning") == "LM"
+    for key in ("name", "description"):
+        lm.pop(key), m.pop(key)
+    assert lm == m
