@@ -84,13 +84,11 @@ class VmpTrackTrainer(Trainer):
         # --------------------------------------------------------- stage II: the tracking policy
         tracker = VmpTracker(p.tracker, ctx.skeleton, latent=latent)
         ppo_params = p.ppo
-        if p.distill is not None and not (workdir / TRACKER_DIR / "ppo.pt").is_file():
-            distilled = self._distill(ctx, p, latent, workdir / DISTILL_DIR)
-            if distilled is None:  # stopped (Ctrl-C): its distill.pt resumes it
-                return StageResult(checkpoint=workdir / DISTILL_DIR / "distill.pt", metrics={})
+        distilled = workdir / DISTILL_DIR / "policy.pt"
+        if p.distill is not None:  # PPO starts from the warm start (a resumed PPO phase restores its own ppo.pt)
+            if not (workdir / TRACKER_DIR / "ppo.pt").is_file() and self._distill(ctx, p, latent, workdir / DISTILL_DIR) is None:
+                return StageResult(checkpoint=workdir / DISTILL_DIR / "distill.pt", metrics={})  # stopped: distill.pt resumes it
             ppo_params = ppo_params.model_copy(update={"init_policy": distilled})
-        elif p.distill is not None:
-            ppo_params = ppo_params.model_copy(update={"init_policy": workdir / DISTILL_DIR / "policy.pt"})
         sub = ctx.phase("tracker", workdir=workdir / TRACKER_DIR, env_factory=lambda n: tracker.make_env(ctx, n))
         try:
             res = PPOTrainer(ppo_params).run(sub)
@@ -104,7 +102,6 @@ class VmpTrackTrainer(Trainer):
             **{f"vae/{k}": float(v) for k, v in (vae_data.get("metrics") or {}).items()},
             **{f"tracker/{k}": float(v) for k, v in res.metrics.items()},
         }
-        distilled = workdir / DISTILL_DIR / "policy.pt"
         if p.distill is not None and distilled.is_file():  # the warm start's last statistics and budget
             extra = load_checkpoint(distilled).get("extra") or {}
             metrics.update({f"distill/{k}": float(v) for k, v in (extra.get("metrics") or {}).items()})
