@@ -67,6 +67,7 @@ def test_reproduce_spec_trains_everything_and_shares_the_imitator():
         "hybrid_rvq_amp_v20_settle",
         "speed_pulse_v20",
         "speed_hybrid_rvq_v20",
+        "speed_vmp_v20",
     }  # the v15 latent and task recipes from imitator_amp_v20 (tests/test_reproduce_v20_latents.py)
     covered |= {"vmp_amp_v20", "vmp_amp_v20_m"}  # vmp_amp.yaml on the v20 humanoid, distilled from imitator_amp_v20 (tests/test_reproduce_v20_latents.py)
     covered |= {name for name, *_ in TASK_POLICIES}  # task policies of specs/tasks/*_v15.yaml (tested below)

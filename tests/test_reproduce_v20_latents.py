@@ -99,6 +99,19 @@ def test_a_v20_task_policy_was_trained_by_its_spec_for_8m_steps(name, decoder):
     assert embedded["imitator"]["checkpoint"] == "../imitator_amp_v20/policy.pt"
 
 
+def test_the_v20_vmp_task_policy_was_trained_by_its_spec_through_the_committed_tracker():
+    spec = load_spec(ROOT / "specs" / "tasks" / "speed_vmp_v20.yaml", get_plugins()).spec
+    _, embedded = _checkpoint("speed_vmp_v20", "task_policy.pt")
+    params = embedded["task"]["trainer"]["params"]
+    assert embedded["name"] == spec.name and embedded["task"]["name"] == spec.task.name == "speed"
+    assert params["total_env_steps"] == 8_000_000 and embedded["simulator"]["params"]["threads"] == 1
+    expected = dict(spec.task.trainer.params)
+    expected.pop("total_env_steps")
+    assert all(params[k] == (list(v) if isinstance(v, tuple) else v) for k, v in expected.items())
+    assert embedded["latent"]["checkpoint"] == "../vmp_amp_v20/latent.pt"
+    assert embedded["latent"]["params"]["task_action"] == "latent"
+
+
 def test_the_v20_vmp_spec_is_vmp_amp_on_the_teachers_humanoid_with_a_distilled_start():
     spec, base = _spec("vmp_amp_v20"), _spec("vmp_amp")
     teacher = _checkpoint("imitator_amp_v20")[1]
