@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import subprocess
 import sys
 import time
@@ -195,14 +196,15 @@ def parse_at_steps(values: list[str] | None) -> dict[str, int]:
     return budgets
 
 
-def _cell_meta(cell_dir: Path) -> tuple[str, str, int]:
+def _cell_meta(cell_dir: Path) -> tuple[str, str, int] | None:
+    """(task, latent, seed) of a cell directory: its ``cell.json``, else its name ``<task>_<latent>_s<seed>``;
+    None for a directory that is neither (an artifact store, a log folder)."""
     meta_file = cell_dir / "cell.json"
     if meta_file.is_file():  # written by `run`; names with underscores (point_goal, hybrid_rvq) parse safely
         meta = json.loads(meta_file.read_text())
         return meta["task"], meta["latent"], int(meta["seed"])
-    task, rest = cell_dir.name.split("_", 1)
-    latent, seed_text = rest.rsplit("_s", 1)
-    return task, latent, int(seed_text)
+    match = re.fullmatch(r"([^_]+)_(.+)_s(\d+)", cell_dir.name)
+    return (match[1], match[2], int(match[3])) if match else None
 
 
 def collect(args: argparse.Namespace) -> int:
@@ -213,7 +215,11 @@ def collect(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     for cell_dir in sorted(p for p in args.out.iterdir() if p.is_dir() and p.name != "artifacts"):
-        task, latent, seed = _cell_meta(cell_dir)
+        meta = _cell_meta(cell_dir)
+        if meta is None:
+            print(f"skipped {cell_dir.name}: not a cell (no cell.json, not named <task>_<latent>_s<seed>)")
+            continue
+        task, latent, seed = meta
         at_steps = budgets.get(task, budgets.get("*"))
         rows, where = cut_at(_rows(cell_dir), at_steps)
         if not rows:

@@ -241,3 +241,16 @@ def test_merge_keeps_earlier_cells_at_the_same_budget_and_replaces_recollected_o
     (tmp_path / "bad.json").write_text("[1, 2]")
     assert tc.main([*args[:-1], str(tmp_path / "bad.json")]) == 2
     assert "not a task_compare JSON" in capsys.readouterr().err
+
+
+def test_collect_skips_folders_that_are_not_cells(tc, tmp_path, capsys):
+    """A run folder also holds artifact stores (`artifacts_train2`); collect read every folder's name as
+    <task>_<latent>_s<seed> and ended in a ValueError traceback on one that is not."""
+    _cell(tmp_path, "speed", "pulse", 0, 10)
+    (tmp_path / "artifacts_train2").mkdir()
+    (tmp_path / "logs").mkdir()
+    out = tmp_path / "res"
+    assert tc.main(["collect", "--out", str(tmp_path), "--json", str(out)]) == 0
+    assert set(json.loads(out.with_suffix(".json").read_text())["cells"]) == {"speed_pulse_s0"}
+    printed = capsys.readouterr().out
+    assert "skipped artifacts_train2: not a cell" in printed and "skipped logs: not a cell" in printed
