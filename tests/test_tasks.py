@@ -313,6 +313,50 @@ def test_reach_far_term_keeps_the_range_and_rewards_approach_from_far(seed, k, w
     assert gain.item() >= w * (math.exp(-4 * kf) - math.exp(-9 * kf)) * 0.999
 
 
+@SETTINGS
+@given(
+    seed=seeds,
+    k=st.floats(0.5, 10.0),
+    w=st.floats(0.0, 0.6),
+    m=st.floats(0.01, 0.4),
+    km=st.floats(0.2, 3.0),
+)
+def test_reach_mid_term_is_the_weighted_sum_and_pays_for_approach_in_the_middle_band(seed, k, w, m, km):
+    rng = np.random.default_rng(seed)
+    c = torch.as_tensor(rng.normal(0.0, 1.0, (32, 3)))
+    hand = c + torch.as_tensor(rng.normal(0.0, 1.5, (32, 3)))
+    r = reach_reward(hand, c, k, w, 0.05, m, km)
+    assert ((r > 0) & (r <= 1 + 1e-12)).all()
+    assert torch.allclose(reach_reward(c, c, k, w, 0.05, m, km), torch.ones(32, dtype=F64))
+    d2 = ((hand - c) ** 2).sum(-1)
+    expected = (1 - w - m) * torch.exp(-k * d2) + m * torch.exp(-km * d2) + w * torch.exp(-0.05 * d2)
+    assert torch.allclose(r, expected)
+    assert torch.equal(reach_reward(hand, c, k, w, 0.05, 0.0, km), reach_reward(hand, c, k, w, 0.05))  # m = 0
+    assert (reach_reward(c + 2 * (hand - c), c, k, w, 0.05, m, km) <= r + 1e-12).all()  # monotone
+    # from 1 m to 0.5 m the middle term alone pays m (exp(-km/4) - exp(-km))
+    at = torch.tensor([[1.0, 0.0, 0.0], [0.5, 0.0, 0.0]], dtype=F64)
+    z = torch.zeros(1, 3, dtype=F64)
+    gain = reach_reward(at[1:], z, k, w, 0.05, m, km) - reach_reward(at[:1], z, k, w, 0.05, m, km)
+    assert gain.item() >= m * (math.exp(-km / 4) - math.exp(-km)) * 0.999
+
+
+def test_reach_weights_over_one_are_refused():
+    with pytest.raises(ValueError, match="far_weight \\+ mid_weight"):
+        reach_reward(torch.zeros(1, 3), torch.ones(1, 3), 5.0, 0.7, 0.05, 0.4)
+    with pytest.raises(ValueError, match="far_weight \\+ mid_weight"):
+        ReachParams(far_weight=0.7, mid_weight=0.4)
+    assert ReachParams(far_weight=0.7, mid_weight=0.3).mid_weight == 0.3  # = 1 is allowed
+
+
+def test_reach_mid_weight_reaches_the_task_reward(amp):
+    s = standing(1, amp.num_bodies)
+    task = make_reach(ReachParams(far_weight=0.3, mid_weight=0.4, mid_coefficient=2.0), skeleton=amp, num_envs=1)
+    task.reset(all_ids(1), s)
+    task.target = s.body_pos[:, task.body_index] + torch.tensor([1.0, 0.0, 0.0], dtype=F64)
+    expected = 0.3 * math.exp(-5.0) + 0.4 * math.exp(-2.0) + 0.3 * math.exp(-0.05)
+    assert task.reward(s, None).item() == pytest.approx(expected)
+
+
 def test_reach_far_weight_reaches_the_task_reward(amp):
     s = standing(1, amp.num_bodies)
     task = make_reach(ReachParams(far_weight=0.5, far_coefficient=0.5), skeleton=amp, num_envs=1)

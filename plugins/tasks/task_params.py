@@ -118,6 +118,19 @@ class ReachParams(BaseModel):
         description="coefficient of the wide term (far_weight): 0.05 pays 0.95 at 1 m, 0.29 at 5 m, 0.007 at 10 m "
         "(0.5 fell to ~0 at the 5 m a PULSE reach policy strays within 1M env steps; [DEFAULT], no paper has the term)",
     )
+    mid_weight: float = Field(
+        0.0,
+        ge=0.0,
+        le=1.0,
+        description="weight m of a middle term: r = (1 - w - m) exp(-coefficient d^2) + m exp(-mid_coefficient d^2) "
+        "+ w exp(-far_coefficient d^2), w = far_weight, w + m <= 1 ([P] and [CODE]: 0; ours)",
+    )
+    mid_coefficient: float = Field(
+        1.0,
+        gt=0.0,
+        description="coefficient of the middle term (mid_weight): 1 pays 0.78 at 0.5 m, 0.37 at 1 m, 0.11 at 1.5 m, "
+        "where exp(-5 d^2) is ~0 and exp(-0.05 d^2) is ~flat ([DEFAULT], no paper has the term)",
+    )
     xy_range: float = Field(
         1.0,
         ge=0.0,
@@ -148,6 +161,8 @@ class ReachParams(BaseModel):
     def _ranges(self) -> ReachParams:
         if self.height_range[0] > self.height_range[1]:
             raise ValueError(f"height_range must be min <= max, got {self.height_range}")
+        if self.far_weight + self.mid_weight > 1.0 + 1e-9:
+            raise ValueError(f"far_weight + mid_weight must be <= 1, got {self.far_weight} + {self.mid_weight}")
         if self.change_steps[0] < 1 or self.change_steps[0] > self.change_steps[1]:
             raise ValueError(f"change_steps must be 1 <= min <= max, got {self.change_steps}")
         return self
