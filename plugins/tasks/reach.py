@@ -23,7 +23,8 @@ and gives PPO nothing to follow (measured through PULSE: mean distance 5.4 m at 
 Switch ``mid_weight`` m (ours; 0 in the paper and the code) adds a third term between the two:
 ``r = (1 - w - m) exp(-coefficient d^2) + m exp(-mid_coefficient d^2) + w exp(-far_coefficient d^2)``,
 for the 0.5-1.5 m band where the narrow term is ~0 and the wide one is ~flat (measured through the
-v20 latents: every seed stood ~1 m from its targets).
+v20 latents: every seed stood ~1 m from its targets). Tried through PULSE v20 (0.3 / 0.4 / 0.3, one
+seed, 7M env steps): no better (bench/results/task_compare_v20.md, ``pulse_mid_reward``).
 
 Termination: a fall (:class:`~mocap_tasks.common.FallParams`).
 
