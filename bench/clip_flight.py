@@ -30,6 +30,7 @@ import math
 import os
 import shlex
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -79,28 +80,26 @@ def free_fall_fps(fps: float, a_z: float, g: float = G) -> float | None:
 
 # ------------------------------------------------------------------------------------ the clips
 def build(checkpoint: Path, clips: list[str]) -> tuple[Any, Any, Any, Any]:
-    """``(skeleton, motion library, MuJoCo model, model index)`` from the checkpoint's embedded spec.
-    Raises ``LookupError`` for an unknown clip name, ``CheckpointError`` for a missing checkpoint."""
+    """``(skeleton, motion library, MuJoCo model, model index)`` from the checkpoint's embedded spec,
+    built through the plugins as ``mocap eval`` builds them (:mod:`mocap.eval_targets`). Raises
+    ``LookupError`` for an unknown clip name, ``UserError`` / ``CheckpointError`` for a bad checkpoint."""
     import torch
-    import yaml
 
-    from mocap.checkpoint import load_checkpoint
-    from mocap.humanoids import AmpParams, make_amp
-    from mocap.motion.deepmimic import DeepMimicParams, DeepMimicSource
+    from mocap.eval_targets import load_evaluation_target
     from mocap.motion.library import MotionLibrary
+    from mocap.plugins import get_plugins
     from mocap_sim_mujoco.mjcf import build_model, model_index
 
-    spec = yaml.safe_load(load_checkpoint(checkpoint)["spec"])
-    if spec["humanoid"]["name"] != "amp" or spec["motions"]["name"] != "deepmimic":
-        raise LookupError(f"{checkpoint}: needs an amp humanoid on deepmimic motions, not {spec['humanoid']['name']}/{spec['motions']['name']}")
-    skeleton = make_amp(AmpParams(**spec["humanoid"]["params"]))
-    mparams = {**spec["motions"]["params"], "clips": None}
-    available = DeepMimicSource(DeepMimicParams(**mparams)).available()
-    unknown = [c for c in clips if c not in available]
+    plugins = get_plugins()
+    resolved = load_evaluation_target(checkpoint, plugins).resolved
+    spec = resolved.spec
+    skeleton = plugins.get("humanoid", spec.humanoid.name).build(resolved.params.get("humanoid"))
+    mset = plugins.get("motion_source", spec.motions.name).build(resolved.params.get("motions")).load(skeleton)
+    unknown = [c for c in clips if c not in mset.names]
     if unknown:
-        raise LookupError(f"unknown clip(s) {', '.join(unknown)}; available: {', '.join(available)}")
-    mset = DeepMimicSource(DeepMimicParams(**{**mparams, "clips": clips})).load(skeleton)
-    lib = MotionLibrary(mset, skeleton, dtype=torch.float64)
+        raise LookupError(f"unknown clip(s) {', '.join(unknown)}; available: {', '.join(mset.names)}")
+    chosen = replace(mset, clips=[mset.clips[mset.names.index(c)] for c in clips])  # keeps the velocity choice
+    lib = MotionLibrary(chosen, skeleton, dtype=torch.float64)
     model = build_model(skeleton)
     return skeleton, lib, model, model_index(model, skeleton)
 
@@ -188,7 +187,7 @@ def render(result: dict[str, Any]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--checkpoint", type=Path, required=True, help="a checkpoint with an embedded spec (amp humanoid, deepmimic motions)")
+    ap.add_argument("--checkpoint", type=Path, required=True, help="a checkpoint with an embedded spec (mocap eval's targets)")
     ap.add_argument("--clips", default="spin,jump,backflip", help="comma-separated clip names")
     ap.add_argument("--threshold", type=float, default=0.03, help="flight: every body geom more than this above the floor, m")
     ap.add_argument("--out", type=Path, default=Path("bench/results/clip_flight"), help="writes <out>.json and <out>.md")
@@ -200,11 +199,12 @@ def main(argv: list[str] | None = None) -> int:
     import torch
 
     from mocap.checkpoint import CheckpointError
+    from mocap.errors import UserError
 
     torch.set_num_threads(1)
     try:
         _, lib, model, idx = build(args.checkpoint, clips)
-    except (LookupError, CheckpointError) as exc:
+    except (LookupError, CheckpointError, UserError) as exc:
         print(f"error: {exc.args[0] if exc.args else exc}", file=sys.stderr)
         return 2
     argv_ = sys.argv[1:] if argv is None else argv
