@@ -16,7 +16,7 @@ would be free fall (``fps * sqrt(g / a_z)``), and the vertical angular momentum 
 (``subtree_angmom`` at the midpoint of each flight step, qvel = the step's difference) with its
 range relative to its largest magnitude in the phase.
 
-    python bench/clip_flight.py --checkpoint checkpoints/imitator_amp_v20/policy.pt \\
+    python bench/clip_flight.py --checkpoint checkpoints/imitator/policy.pt \\
         --clips spin,jump,backflip --threshold 0.03 --out bench/results/clip_flight
 
 Writes ``<out>.json`` and ``<out>.md``.

@@ -16,7 +16,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 ROOT = Path(__file__).resolve().parents[1]
-CHECKPOINT = ROOT / "checkpoints" / "imitator_amp_v20" / "policy.pt"
+CHECKPOINT = ROOT / "checkpoints" / "imitator" / "policy.pt"
 SETTINGS = settings(
     max_examples=50,
     deadline=None,
@@ -77,7 +77,7 @@ def _main_flight(result):
     return max(result["phases"], key=lambda p: p["duration_s"])
 
 
-@pytest.mark.skipif(not CHECKPOINT.is_file(), reason="no checkpoints/imitator_amp_v20/policy.pt")
+@pytest.mark.skipif(not CHECKPOINT.is_file(), reason="no checkpoints/imitator/policy.pt")
 def test_jump_falls_at_g_and_spin_does_not():
     _, lib, model, idx = cf.build(CHECKPOINT, ["spin", "jump"])
     jump = _main_flight(cf.analyse(lib, model, idx, "jump", 0.05))
@@ -87,7 +87,7 @@ def test_jump_falls_at_g_and_spin_does_not():
     assert spin["free_fall_fps"] > 27.0 and spin["ballistic_flight_s"] < spin["duration_s"] - 0.1
 
 
-@pytest.mark.skipif(not CHECKPOINT.is_file(), reason="no checkpoints/imitator_amp_v20/policy.pt")
+@pytest.mark.skipif(not CHECKPOINT.is_file(), reason="no checkpoints/imitator/policy.pt")
 def test_an_unknown_clip_is_one_error_line_and_exit_2(tmp_path: Path, capsys):
     rc = cf.main(["--checkpoint", str(CHECKPOINT), "--clips", "spin,nosuchclip", "--out", str(tmp_path / "x")])
     err = capsys.readouterr().err

@@ -43,9 +43,9 @@ TINY: dict[str, list[str] | None] = {
     ],
     "mocap motions list": None,
     "mocap render --motion walk --out walk.mp4": ["--seconds", "0.5"],
-    "mocap play checkpoints/pulse_amp_v20_beta": None,  # needs a display: one error line without one
-    "mocap render checkpoints/pulse_amp_v20_beta --clip backflip --seconds 2.5 --out pulse_backflip.mp4": ["--seconds", "0.5"],
-    "mocap render checkpoints/pulse_amp_v20_beta --generate --out gen.mp4": ["--seconds", "0.5"],
+    "mocap play checkpoints/pulse": None,  # needs a display: one error line without one
+    "mocap render checkpoints/pulse --clip backflip --seconds 2.5 --out pulse_backflip.mp4": ["--seconds", "0.5"],
+    "mocap render checkpoints/pulse --generate --out gen.mp4": ["--seconds", "0.5"],
     "mocap run specs/reproduce/bundled.yaml": [
         "--set",
         "matrix.latent=[null]",
@@ -89,7 +89,7 @@ TINY: dict[str, list[str] | None] = {
         "--set",
         "eval=null",
     ],
-    "mocap eval checkpoints/imitator_amp_v20": None,
+    "mocap eval checkpoints/imitator": None,
     "mocap eval-noisy checkpoints/imitator_amp_v2": None,
     "mocap generate runs/pulse-amp-bundled --video gen.mp4": None,
     "mocap export runs/pulse-amp-bundled checkpoints/my_pulse": None,

@@ -11,7 +11,7 @@ import pytest
 
 from mocap.plugins import get_plugins
 from mocap.spec import load_spec
-from test_reproduce_spec import _checkpoint
+from test_reproduce_spec import _checkpoint, checkpoint_dir
 
 ROOT = Path(__file__).resolve().parents[1]
 LATENT = ROOT / "specs" / "latent"
@@ -30,7 +30,7 @@ def test_a_settle_spec_is_its_source_continued_with_a_decaying_rate(name, source
     spec = load_spec(LATENT / f"{name}.yaml", plugins).spec
     base = load_spec(LATENT / f"{source}.yaml", plugins).spec
     params = spec.latent.trainer.params
-    assert Path(params["init_latent"]).resolve() == (ROOT / "checkpoints" / source / "latent.pt").resolve()
+    assert Path(params["init_latent"]).resolve() == (checkpoint_dir(source) / "latent.pt").resolve()
     assert (params["lr"], params["lr_end"], params["total_env_steps"]) == (0.0005, 0.00005, 4_000_000)
     assert spec.latent.name == base.latent.name
     a, b = spec.latent.model_dump(), base.latent.model_dump()
@@ -66,7 +66,7 @@ def test_a_speed_spec_through_another_decoder_differs_by_the_decoder_only(name, 
     plugins = get_plugins()
     spec = load_spec(ROOT / "specs" / "tasks" / f"{name}.yaml", plugins).spec
     base = load_spec(ROOT / "specs" / "tasks" / f"{source}.yaml", plugins).spec
-    assert Path(spec.latent.checkpoint).resolve() == (ROOT / "checkpoints" / decoder / "latent.pt").resolve()
+    assert Path(spec.latent.checkpoint).resolve() == (checkpoint_dir(decoder) / "latent.pt").resolve()
     assert spec.latent.model_copy(update={"checkpoint": None}) == base.latent.model_copy(update={"checkpoint": None})
     assert spec.task == base.task and spec.imitator == base.imitator and spec.humanoid == base.humanoid and spec.motions == base.motions
 
@@ -159,5 +159,5 @@ def test_an_imitator_continued_on_smoothed_velocities_and_its_next_spec(name, so
     nxt = load_spec(ROOT / "specs" / "imitator" / f"continue_{name}.yaml", plugins).spec
     assert nxt.motions == recipe.motions and nxt.humanoid == recipe.humanoid and nxt.imitator.params == recipe.imitator.params
     a, b = nxt.imitator.trainer.params, recipe.imitator.trainer.params
-    assert Path(a["init_policy"]).resolve() == (ROOT / "checkpoints" / f"imitator_amp_{name}" / "policy.pt").resolve()
+    assert Path(a["init_policy"]).resolve() == (checkpoint_dir(f"imitator_amp_{name}") / "policy.pt").resolve()
     assert {k: v for k, v in a.items() if k != "init_policy"} == {k: v for k, v in b.items() if k != "init_policy"}

@@ -16,6 +16,13 @@ from mocap.spec import load_spec
 
 ROOT = Path(__file__).resolve().parents[1]
 SPEC = ROOT / "specs" / "reproduce" / "bundled.yaml"
+# the canonical checkpoint directories (issue 23): the trained model each names, by its spec's name
+CANONICAL = {"imitator_amp_v20": "imitator", "pulse_amp_v20_beta": "pulse", "hybrid_rvq_amp_v20_settle": "hybrid_rvq", "vmp_amp_v20": "vmp"}
+
+
+def checkpoint_dir(name: str) -> Path:
+    """``checkpoints/<dir>`` of the model trained by the spec (or run) ``name``."""
+    return ROOT / "checkpoints" / CANONICAL.get(name, name)
 
 
 def _checkpoint(name: str, file: str = "policy.pt") -> tuple[dict, dict]:
@@ -24,7 +31,7 @@ def _checkpoint(name: str, file: str = "policy.pt") -> tuple[dict, dict]:
 
     from mocap.checkpoint import load_checkpoint
 
-    data = load_checkpoint(ROOT / "checkpoints" / name / file)
+    data = load_checkpoint(checkpoint_dir(name) / file)
     return data, yaml.safe_load(data["spec"])
 
 
@@ -70,6 +77,7 @@ def test_reproduce_spec_trains_everything_and_shares_the_imitator():
         "speed_vmp_v20",
     }  # the v15 latent and task recipes from imitator_amp_v20 (tests/test_reproduce_v20_latents.py)
     covered |= {"vmp_amp_v20", "vmp_amp_v20_m"}  # vmp_amp.yaml on the v20 humanoid, distilled from imitator_amp_v20 (tests/test_reproduce_v20_latents.py)
+    covered = {CANONICAL.get(name, name) for name in covered}
     covered |= {name for name, *_ in TASK_POLICIES}  # task policies of specs/tasks/*_v15.yaml (tested below)
     covered |= {"pulse_amp_v2"}
     covered |= latents

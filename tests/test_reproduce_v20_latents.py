@@ -1,4 +1,4 @@
-"""The latent spaces distilled from ``checkpoints/imitator_amp_v20``: each stage-1 spec is its v15 recipe with
+"""The latent spaces distilled from ``checkpoints/imitator``: each stage-1 spec is its v15 recipe with
 the v20 teacher and the reference velocities v20 was trained on (nothing else differs), and each stage-2 spec
 continues its stage 1 exactly as the v15 continuation continued its own. Committed checkpoints embed them."""
 
@@ -10,7 +10,7 @@ import pytest
 
 from mocap.plugins import get_plugins
 from mocap.spec import load_spec
-from test_reproduce_spec import _checkpoint
+from test_reproduce_spec import _checkpoint, checkpoint_dir
 
 ROOT = Path(__file__).resolve().parents[1]
 LATENT = ROOT / "specs" / "latent"
@@ -29,7 +29,7 @@ def _spec(name: str):
 @pytest.mark.parametrize(("name", "recipe", "_s2", "_r2"), STAGES)
 def test_a_v20_latent_is_its_v15_recipe_with_the_v20_teacher_and_its_velocities(name, recipe, _s2, _r2):
     spec, base = _spec(name), _spec(recipe)
-    assert Path(spec.imitator.checkpoint).resolve() == (ROOT / "checkpoints" / "imitator_amp_v20" / "policy.pt").resolve()
+    assert Path(spec.imitator.checkpoint).resolve() == (checkpoint_dir("imitator_amp_v20") / "policy.pt").resolve()
     assert spec.imitator.model_copy(update={"checkpoint": None}) == base.imitator.model_copy(update={"checkpoint": None})
     teacher = _checkpoint("imitator_amp_v20")[1]["motions"]["params"]
     motions = spec.motions.params
@@ -44,7 +44,7 @@ def test_a_v20_latent_is_its_v15_recipe_with_the_v20_teacher_and_its_velocities(
 def test_a_v20_stage_two_continues_its_stage_one_as_v15_did(stage1, _r1, name, counterpart):
     spec, base = _spec(name), _spec(counterpart)
     params = spec.latent.trainer.params
-    assert Path(params["init_latent"]).resolve() == (ROOT / "checkpoints" / stage1 / "latent.pt").resolve()
+    assert Path(params["init_latent"]).resolve() == (checkpoint_dir(stage1) / "latent.pt").resolve()
     a, b = spec.latent.model_dump(), base.latent.model_dump()
     a["trainer"]["params"].pop("init_latent"), b["trainer"]["params"].pop("init_latent")
     assert a == b  # the same rate decay, budget and held schedules
@@ -56,8 +56,8 @@ def test_a_v20_task_spec_is_its_v15_one_through_the_v20_decoder(name, decoder):
     plugins = get_plugins()
     spec = load_spec(ROOT / "specs" / "tasks" / f"{name}_v20.yaml", plugins).spec
     base = load_spec(ROOT / "specs" / "tasks" / f"{name}_v15.yaml", plugins).spec
-    assert Path(spec.latent.checkpoint).resolve() == (ROOT / "checkpoints" / decoder / "latent.pt").resolve()
-    assert Path(spec.imitator.checkpoint).resolve() == (ROOT / "checkpoints" / "imitator_amp_v20" / "policy.pt").resolve()
+    assert Path(spec.latent.checkpoint).resolve() == (checkpoint_dir(decoder) / "latent.pt").resolve()
+    assert Path(spec.imitator.checkpoint).resolve() == (checkpoint_dir("imitator_amp_v20") / "policy.pt").resolve()
     assert spec.latent.model_copy(update={"checkpoint": None}) == base.latent.model_copy(update={"checkpoint": None})
     assert spec.task == base.task and spec.humanoid == base.humanoid and spec.simulator == base.simulator
     assert spec.motions.params["velocities"] == "central_smoothed" and spec.motions.name == base.motions.name
@@ -75,9 +75,9 @@ def test_a_v20_task_spec_is_its_v15_one_through_the_v20_decoder(name, decoder):
 def test_a_committed_v20_latent_embeds_its_spec_and_teacher(name, steps, start):
     data, embedded = _checkpoint(name, "latent.pt")
     assert embedded["name"] == _spec(name).name == name.replace("_", "-")
-    assert embedded["imitator"]["checkpoint"] == "../imitator_amp_v20/policy.pt"
+    assert embedded["imitator"]["checkpoint"] == "../imitator/policy.pt"
     assert embedded["motions"]["params"]["velocities"] == "central_smoothed"
-    assert embedded["latent"]["trainer"]["params"].get("init_latent") == (None if start is None else f"../{start}/latent.pt")
+    assert embedded["latent"]["trainer"]["params"].get("init_latent") == (None if start is None else f"../{checkpoint_dir(start).name}/latent.pt")
     assert data["extra"]["metrics"]["env_steps"] == steps and data["extra"]["metrics"]["eval/total"] == 15
 
 
@@ -95,8 +95,8 @@ def test_a_v20_task_policy_was_trained_by_its_spec_for_8m_steps(name, decoder):
     expected = dict(spec.task.trainer.params)
     expected.pop("total_env_steps")
     assert all(params[k] == (list(v) if isinstance(v, tuple) else v) for k, v in expected.items())
-    assert embedded["latent"]["checkpoint"] == f"../{decoder}/latent.pt"
-    assert embedded["imitator"]["checkpoint"] == "../imitator_amp_v20/policy.pt"
+    assert embedded["latent"]["checkpoint"] == f"../{checkpoint_dir(decoder).name}/latent.pt"
+    assert embedded["imitator"]["checkpoint"] == "../imitator/policy.pt"
 
 
 def test_the_v20_vmp_task_policy_was_trained_by_its_spec_through_the_committed_tracker():
@@ -108,14 +108,14 @@ def test_the_v20_vmp_task_policy_was_trained_by_its_spec_through_the_committed_t
     expected = dict(spec.task.trainer.params)
     expected.pop("total_env_steps")
     assert all(params[k] == (list(v) if isinstance(v, tuple) else v) for k, v in expected.items())
-    assert embedded["latent"]["checkpoint"] == "../vmp_amp_v20/latent.pt"
+    assert embedded["latent"]["checkpoint"] == "../vmp/latent.pt"
     assert embedded["latent"]["params"]["task_action"] == "latent"
 
 
 def test_the_v20_vmp_spec_is_vmp_amp_on_the_teachers_humanoid_with_a_distilled_start():
     spec, base = _spec("vmp_amp_v20"), _spec("vmp_amp")
     teacher = _checkpoint("imitator_amp_v20")[1]
-    assert Path(spec.imitator.checkpoint).resolve() == (ROOT / "checkpoints" / "imitator_amp_v20" / "policy.pt").resolve()
+    assert Path(spec.imitator.checkpoint).resolve() == (checkpoint_dir("imitator_amp_v20") / "policy.pt").resolve()
     for key in ("shoulder_turns", "shoulder_order"):
         assert spec.humanoid.params[key] == teacher["humanoid"]["params"][key]
     for key in ("velocities", "velocity_sigma"):
@@ -133,7 +133,7 @@ def test_the_v20_vmp_spec_is_vmp_amp_on_the_teachers_humanoid_with_a_distilled_s
 def test_the_committed_v20_vmp_embeds_its_spec_teacher_and_budgets(name, conditioning):
     data, embedded = _checkpoint(name, "latent.pt")
     assert embedded["name"] == _spec(name).name == name.replace("_", "-")
-    assert embedded["imitator"]["checkpoint"] == "../imitator_amp_v20/policy.pt"
+    assert embedded["imitator"]["checkpoint"] == "../imitator/policy.pt"
     params = embedded["latent"]["trainer"]["params"]
     assert params["distill"]["total_env_steps"] == 6_000_000 and params["tracker"]["conditioning"] == conditioning
     assert data["tracker"]["metrics"]["env_steps"] == 2_007_040  # PPO after the distillation (8192-step iterations)

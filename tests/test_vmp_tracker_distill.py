@@ -293,7 +293,7 @@ def test_distill_without_a_teacher_is_one_error_line(tmp_path):
 
 
 def test_eval_of_a_distilled_vmp_tracker_compares_it_with_its_teacher_not_with_itself():
-    """`mocap eval checkpoints/vmp_amp_v20` printed the VMP tracker's numbers twice, once labelled as the
+    """`mocap eval checkpoints/vmp` printed the VMP tracker's numbers twice, once labelled as the
     teacher: for a latent with its own tracker the spec's imitator is now the teacher it is compared with."""
     from pathlib import Path
 
@@ -303,7 +303,7 @@ def test_eval_of_a_distilled_vmp_tracker_compares_it_with_its_teacher_not_with_i
     from mocap_vmp.tracking import VmpImitator
 
     plugins = get_plugins()
-    target = load_evaluation_target(Path(__file__).resolve().parents[1] / "checkpoints" / "vmp_amp_v20", plugins)
+    target = load_evaluation_target(Path(__file__).resolve().parents[1] / "checkpoints" / "vmp", plugins)
     loaded = build_evaluation_target(target, plugins)
     assert loaded.own_tracker and isinstance(loaded.policy, VmpImitator)
     assert isinstance(loaded.imitator, PHCImitator) and loaded.imitator is not loaded.policy
