@@ -29,7 +29,7 @@ TINY: dict[str, list[str] | None] = {
         "--set",
         "task.trainer.params.total_env_steps=1024",
         "--set",
-        "motions.params.clips=[walk, backflip]",
+        "motions.params.clips=[walk, run, backflip]",  # the quickstart starts generation in walk and run frames
         "--set",
         "eval.trainer.params.generation.num_rollouts=2",
         "--set",
@@ -77,7 +77,7 @@ TINY: dict[str, list[str] | None] = {
         "eval.trainer.params.video_seconds=0.3",
     ],
     "mocap eval runs/imitator-amp-bundled --json eval.json --video videos/": None,
-    "mocap run specs/latent/pulse_amp.yaml": [
+    "mocap run specs/latent/pulse_amp_v20.yaml": [
         "--set",
         "latent.trainer.params.num_envs=16",
         "--set",
@@ -90,10 +90,10 @@ TINY: dict[str, list[str] | None] = {
         "eval=null",
     ],
     "mocap eval checkpoints/imitator": None,
-    "mocap eval-noisy checkpoints/imitator_amp_v2": None,
-    "mocap generate runs/pulse-amp-bundled --video gen.mp4": None,
-    "mocap export runs/pulse-amp-bundled checkpoints/my_pulse": None,
-    "mocap run specs/tasks/speed_scratch.yaml": [
+    "mocap eval-noisy checkpoints/imitator": None,
+    "mocap generate runs/pulse-amp-v20 --video gen.mp4": None,
+    "mocap export runs/pulse-amp-v20 checkpoints/my_pulse": None,
+    "mocap run specs/tasks/speed_pulse_v20.yaml": [
         "--set",
         "task.trainer.params.num_envs=4",
         "--set",
@@ -107,11 +107,11 @@ TINY: dict[str, list[str] | None] = {
         "--set",
         "eval=null",
     ],
-    "mocap render runs/speed-scratch --out speed.mp4": ["--seconds", "0.5"],
-    "mocap task-eval runs/speed-scratch --json speed_eval.json": ["--envs", "2", "--seconds", "0.5"],
-    "mocap task-eval checkpoints/speed_pulse_v15": ["--envs", "2", "--seconds", "0.5"],
-    "mocap task-eval checkpoints/speed_pulse_v15 --start-clips walk,run": ["--envs", "2", "--seconds", "0.5"],
-    "mocap render checkpoints/speed_pulse_v15 --out speed_pulse.mp4": ["--seconds", "0.5"],
+    "mocap render runs/speed-pulse-v20 --out speed.mp4": ["--seconds", "0.5"],
+    "mocap task-eval runs/speed-pulse-v20 --json speed_eval.json": ["--envs", "2", "--seconds", "0.5"],
+    "mocap task-eval checkpoints/speed_pulse_v20": ["--envs", "2", "--seconds", "0.5"],
+    "mocap task-eval checkpoints/speed_pulse_v20 --start-clips walk,run": ["--envs", "2", "--seconds", "0.5"],
+    "mocap render checkpoints/speed_pulse_v20 --out speed_pulse.mp4": ["--seconds", "0.5"],
     "mocap switches": None,
     "mocap checkpoint convert OLD.pt --trust": None,  # OLD.pt: a stand-in written by the test
 }
