@@ -17,7 +17,7 @@ from mocap.spec import load_spec
 ROOT = Path(__file__).resolve().parents[1]
 SPEC = ROOT / "specs" / "reproduce" / "bundled.yaml"
 # the canonical checkpoint directories (issue 23): the trained model each names, by its spec's name
-CANONICAL = {"imitator_amp_v20": "imitator", "pulse_amp_v20_beta": "pulse", "hybrid_rvq_amp_v20_settle": "hybrid_rvq", "vmp_amp_v20": "vmp"}
+CANONICAL = {"imitator_amp_v20": "imitator", "pulse_amp_v20_stage3": "pulse", "hybrid_rvq_amp_v20_settle": "hybrid_rvq", "vmp_amp_v20": "vmp"}
 
 
 def checkpoint_dir(name: str) -> Path:
@@ -70,6 +70,7 @@ def test_reproduce_spec_trains_everything_and_shares_the_imitator():
     covered |= {
         "pulse_amp_v20",
         "pulse_amp_v20_beta",
+        "pulse_amp_v20_stage3",
         "hybrid_rvq_amp_v20",
         "hybrid_rvq_amp_v20_settle",
         "speed_pulse_v20",

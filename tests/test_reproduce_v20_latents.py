@@ -70,6 +70,7 @@ def test_a_v20_task_spec_is_its_v15_one_through_the_v20_decoder(name, decoder):
         ("hybrid_rvq_amp_v20", 8_001_536, None),
         ("pulse_amp_v20_beta", 4_001_792, "pulse_amp_v20"),
         ("hybrid_rvq_amp_v20_settle", 4_001_792, "hybrid_rvq_amp_v20"),
+        ("pulse_amp_v20_stage3", 3_000_320, "pulse_amp_v20_beta"),
     ],
 )
 def test_a_committed_v20_latent_embeds_its_spec_and_teacher(name, steps, start):
@@ -146,3 +147,17 @@ def test_the_v20_vmp_m_ablation_differs_from_lm_by_the_conditioning_only():
     for key in ("name", "description"):
         lm.pop(key), m.pop(key)
     assert lm == m
+
+
+def test_the_third_pulse_stage_continues_the_second_with_a_lower_rate_only():
+    """checkpoints/pulse (pulse_amp_v20_stage3): stage 2 (pulse_amp_v20_beta) continued from its latent.pt with the
+    rate 2e-4 -> 2e-5 for 3M env steps; nothing else differs."""
+    spec, base = _spec("pulse_amp_v20_stage3"), _spec("pulse_amp_v20_beta")
+    params = spec.latent.trainer.params
+    assert Path(params["init_latent"]).resolve() == (checkpoint_dir("pulse_amp_v20_beta") / "latent.pt").resolve()
+    assert (params["lr"], params["lr_end"], params["total_env_steps"]) == (2e-4, 2e-5, 3_000_000)
+    a, b = spec.latent.model_dump(), base.latent.model_dump()
+    for key in ("init_latent", "lr", "lr_end", "total_env_steps"):
+        a["trainer"]["params"].pop(key), b["trainer"]["params"].pop(key)
+    assert a == b
+    assert spec.imitator == base.imitator and spec.motions == base.motions and spec.humanoid == base.humanoid
