@@ -87,7 +87,8 @@ def _fmt(c: dict | None) -> str:
     v, pct = c["value"], c["metric"] != "speed_error"
     scale, unit = (100.0, "%") if pct else (1.0, " m/s")
     seeds = "1 seed" if v["n"] == 1 else f"{v['n']} seeds"
-    text = f"{scale * v['mean']:.3g} ± {scale * v['std']:.2g}{unit} ({seeds}, {c['env_steps'] / 1e6:.0f}M)"
+    spread = "" if v["n"] == 1 else f" ± {scale * v['std']:.2g}"
+    text = f"{scale * v['mean']:.3g}{spread}{unit} ({seeds}, {c['env_steps'] / 1e6:.0f}M)"
     if c["closest"] is not None:
         text += f"; closest {c['closest']['mean']:.2f} m"
     return text

@@ -93,6 +93,8 @@ def test_the_table_and_the_tally_from_two_jsons(ts, tmp_path, capsys):
     assert "| speed | 0.69 ± 0.04 m/s (3 seeds, 7M) | 1.18 ± 0.08 m/s (3 seeds, 8M) | no |" in text
     assert "| reach | 29 ± 4% (3 seeds, 7M); closest 0.33 m | 0.58 ± 0.5% (3 seeds, 7M); closest 1.00 m | no |" in text
     assert "| strike | - | - | not comparable |" in text
+    one = ts._fmt({"metric": "hit_rate", "value": {"mean": 0.0513, "std": 0.0, "n": 1}, "env_steps": 5e6, "closest": None})
+    assert one == "5.13% (1 seed, 5M)"  # no spread shown for one seed
     assert "PULSE beats scratch on 0 of 4 tasks." in text
     saved = json.loads(out.with_suffix(".json").read_text())
     assert saved["verdicts"]["PULSE beats scratch"]["speed"] == "no" and saved["rows"]["reach"]["PULSE"]["latent"] == "pulse_far_reward"
