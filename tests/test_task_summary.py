@@ -53,8 +53,7 @@ def test_the_verdict_respects_the_direction_of_the_metric_and_the_budget(ts):
     b=st.floats(0.0, 5.0, allow_nan=False),
     metric=st.sampled_from(["speed_error", "success_rate", "hit_rate"]),
 )
-def test_at_equal_budgets_exactly_one_of_two_different_cells_beats_the_other(a, b, metric):
-    ts = load_bench("task_summary")
+def test_at_equal_budgets_exactly_one_of_two_different_cells_beats_the_other(ts, a, b, metric):
     x, y = _cell(metric, a, 7e6), _cell(metric, b, 7e6)
     vx, vy = ts.verdict(x, y), ts.verdict(y, x)
     assert {vx, vy} <= {"yes", "no"}
