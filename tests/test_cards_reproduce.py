@@ -1,9 +1,9 @@
 """Issue 23's "Done when": `mocap eval` and `mocap generate` of each canonical checkpoint reproduce the
 numbers its model card quotes, which are the committed ``eval.json`` / ``generation.json`` beside it.
 
-Slow (about 90 s on 2 idle cores): it runs the CLI the card names, as a user would, into a temporary
+Slow (about 80 s on 2 idle cores): it runs the CLI the card names, as a user would, into a temporary
 directory, and compares every number of the fresh JSON with the committed one. A retrained or edited
-checkpoint whose files were not regenerated fails here, naming the first numbers that differ."""
+checkpoint whose files were not regenerated fails here, naming up to 20 of the numbers that differ."""
 
 from __future__ import annotations
 
@@ -49,7 +49,7 @@ def numbers(node: object, path: str = "") -> dict[str, float]:
 
 
 def differences(fresh: object, committed: object, rel: float = 1e-4) -> list[str]:
-    """Paths whose numbers differ beyond ``rel`` (or exist on one side only), committed first."""
+    """Sorted paths whose numbers differ beyond ``rel`` or exist on one side only."""
     a, b = numbers(fresh), numbers(committed)
     out = [f"{k}: missing from the fresh run" for k in b if k not in a]
     out += [f"{k}: not in the committed file" for k in a if k not in b]
