@@ -260,3 +260,23 @@ def test_hybrid_random_action_shapes(amp):
         a = latent.random_action(obs, generator=g)
         b = latent.random_action(obs, generator=torch.Generator().manual_seed(0))
         assert a.shape == (3, amp.num_dofs) and torch.equal(a, b)
+
+
+@settings(max_examples=30, deadline=None, derandomize=True)
+@given(features=st.integers(2, 16), threshold=st.floats(0.05, 5.0), factor=st.sampled_from([0.8, 1.25]), seed=st.integers(0, 1000))
+def test_motion_matching_filters_on_the_per_feature_squared_distance(features, threshold, factor, seed):
+    """hybrid_rvq Eq. 8's filter: a transition is kept when its squared distance to the nearest
+    dataset transition, in standardized features, divided by the feature count F is within the
+    threshold. A point at per-feature squared distance 0.8 t is kept (its total, 0.8 t F, is not
+    within t); at 1.25 t it is filtered."""
+    gen = torch.Generator().manual_seed(seed)
+    scale = torch.rand(features, generator=gen, dtype=torch.float64) + 0.5
+    centre = torch.randn(features, generator=gen, dtype=torch.float64)
+    data = torch.stack([centre + scale, centre - scale])  # standardized: +-1/sqrt(2) per feature
+    std = data.std(0)
+    e = math.sqrt(factor * threshold)  # per-feature standardized offset, away from the other point
+    point = data[0] + e * std
+    out = motion_matching(point.unsqueeze(0), data, threshold=threshold)
+    assert out["filtered"] == (0.0 if factor < 1 else 1.0)
+    if factor < 1:
+        assert out["match_distance"] == pytest.approx(features * e * e, rel=1e-4)

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
+import pytest
 import torch
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -151,3 +153,38 @@ def test_each_reward_term_responds_to_its_own_quantity_and_scale_alone(seed, ter
     for other in ("pos", "rot", "vel", "ang_vel"):
         if other != term:
             torch.testing.assert_close(terms[other], torch.ones(3, dtype=F64), atol=1e-9, rtol=0)
+
+
+@pytest.mark.parametrize("form", ["paper", "code"])
+def test_default_reward_pins_each_scale_to_its_term_and_squares_the_code_forms_angles(form):
+    """The defaults of PHC's code (PULSE Table 4): weights (0.5, 0.3, 0.1, 0.1) and scales
+    (k_p, k_r, k_v, k_w) = (100, 10, 0.1, 0.1), each on its own term; the rotation error of the code
+    form is the mean over bodies of the *squared* angle (``compute_imitation_reward``), the paper
+    form's the mean angle. Hand numbers: two bodies rotated by 0.2 and 0.6 rad."""
+    from dataclasses import replace as dc_replace
+
+    from mocap.rotations import quat_from_axis_angle, quat_mul
+
+    ref = random_state(np.random.default_rng(3), 1, 2)
+    angles = torch.tensor([[0.2, 0.6]], dtype=F64)
+    turn = quat_from_axis_angle(torch.tensor([[[0.0, 0.0, 1.0]] * 2], dtype=F64), angles)
+    offset = torch.tensor([[[0.03, 0.0, 0.04], [0.0, 0.0, 0.0]]], dtype=F64)  # norms 0.05 and 0
+    e = {  # per-term errors of the perturbations below
+        "pos": 0.025 if form == "paper" else (0.03**2 + 0.04**2) / 6,
+        "rot": 0.4 if form == "paper" else (0.2**2 + 0.6**2) / 2,
+    }
+    e["vel"] = e["ang_vel"] = e["pos"]
+    scale = {"pos": 100.0, "rot": 10.0, "vel": 0.1, "ang_vel": 0.1}
+    weight = {"pos": 0.5, "rot": 0.3, "vel": 0.1, "ang_vel": 0.1}
+    moved = {
+        "pos": dc_replace(ref, body_pos=ref.body_pos + offset),
+        "rot": dc_replace(ref, body_rot=quat_mul(turn, ref.body_rot)),
+        "vel": dc_replace(ref, body_lin_vel=ref.body_lin_vel + offset),
+        "ang_vel": dc_replace(ref, body_ang_vel=ref.body_ang_vel + offset),
+    }
+    fn = ImitationReward(form=form)
+    for term, sim in moved.items():
+        total, terms = fn(sim, ref)
+        expect = math.exp(-scale[term] * e[term])
+        assert float(terms[term][0]) == pytest.approx(expect, rel=1e-9), term
+        assert float(total[0]) == pytest.approx(1.0 - weight[term] * (1.0 - expect), rel=1e-9), term
