@@ -137,6 +137,13 @@ def check_simulator(sim: Simulator, steps: int = 3) -> list[str]:
     return report
 
 
+_FORGETS_GOALS = (
+    "Task.load_state_dict(state_dict()) does not restore the goals: return every per-env goal, timer and generator state "
+    "from Task.state_dict() and set them back in Task.load_state_dict(), or a resumed task stage diverges from an "
+    "uninterrupted one (docs/plugins.md, 'What the framework calls, and when')"
+)
+
+
 def check_task(
     task: Task,
     skeleton: Skeleton,
@@ -190,7 +197,7 @@ def check_task(
     if sim is not None and physics is not None:
         load_sim_state(sim, torch.arange(N), physics)
     task.load_state_dict(saved)
-    _require(bool(torch.allclose(task.observe(state), before)), "Task.load_state_dict(state_dict()) does not restore the goals")
+    _require(bool(torch.allclose(task.observe(state), before)), _FORGETS_GOALS)
     return [f"{steps} steps of {N} envs", "subset reset", "metrics" if declared is None else "declared metrics", "state_dict round-trip"]
 
 
@@ -239,6 +246,12 @@ def check_latent_space(latent: LatentSpace, obs: Observations, action_dim: int) 
         _finite(zt, "LatentSpace.to_latent")
         checked = "encoder, prior, decode_action" if latent.has_encoder else "prior, decode_action (no encoder)"
         report = [checked, f"task action space {type(space).__name__}", "to_latent"]
+        offers_random_action = type(latent).random_action is not LatentSpace.random_action
+        _require(
+            latent.samples_prior or not offers_random_action,
+            f"{type(latent).__name__} defines random_action but leaves samples_prior False, so mocap generate and prior "
+            "rollouts will not use it: set the class attribute samples_prior = True (docs/plugins.md, 'What the framework calls, and when')",
+        )
         if latent.samples_prior:
             ra = latent.random_action(obs, 1.0, g)
             _require(isinstance(ra, Tensor) and ra.shape[0] == N, "LatentSpace.random_action: expected N rows")

@@ -22,12 +22,15 @@ class EvalTarget:
 
     ``latent_checkpoint`` is set when the target is a latent space; it is then evaluated as an
     imitator (:class:`~mocap.latent_imitator.LatentImitator`, ``z`` = encoder mean) on top of the
-    imitator it was distilled from (``imitator_checkpoint``).
+    imitator it was distilled from (``imitator_checkpoint``). ``code_note``: for a checkpoint file,
+    what differs between the plugin code it records and the installed code (:func:`code_difference`;
+    ``mocap eval`` prints it as one ``note:`` line after its results), None when they match.
     """
 
     resolved: Any
     imitator_checkpoint: Path | None
     latent_checkpoint: Path | None = None
+    code_note: str | None = None
 
     @property
     def spec(self) -> Any:
@@ -85,12 +88,40 @@ def _from_file(target: Path, plugins: Any) -> EvalTarget:
 
     doc = resolve_embedded_paths(yaml_mapping(spec_yaml, f"{target} (embedded spec)"), target.parent)
     resolved = validate_document(doc, plugins, source=f"{target} (embedded spec)", provenance=data.get("components"))
+    note = code_difference(data.get("components"), resolved, plugins)
     from mocap.distill_files import CHECKPOINT_FORMAT as DISTILL_FORMAT, LATENT_FORMAT
 
     if data.get("format") in (LATENT_FORMAT, DISTILL_FORMAT) or (resolved.spec.imitator is None and resolved.spec.latent is not None):
         teacher = _stage_checkpoint(resolved.spec, "imitator")
-        return _check(EvalTarget(resolved, teacher, target), target)
-    return _check(EvalTarget(resolved, target), target)
+        return _check(EvalTarget(resolved, teacher, target, note), target)
+    return _check(EvalTarget(resolved, target, code_note=note), target)
+
+
+def code_difference(recorded: Any, resolved: Any, plugins: Any) -> str | None:
+    """What differs between the plugin code a checkpoint recorded (its ``components``:
+    :meth:`mocap.plugins.PluginSet.provenance`) and the installed code, for the components its
+    spec names; None when they match. A checkpoint from before code fingerprints says so."""
+    from mocap.plugins import PluginError
+    from mocap.spec import iter_components
+
+    if not isinstance(recorded, dict) or not any(isinstance(v, dict) and "code" in v for v in recorded.values()):
+        return "it records no plugin code fingerprint (written before mocap recorded one), so it cannot tell whether the installed code made it"
+    changed = []
+    for _, kind, ref in iter_components(resolved.spec):
+        entry = recorded.get(f"{kind}:{ref.name}")
+        if not isinstance(entry, dict) or "code" not in entry:
+            continue
+        try:
+            now = plugins.code_of(kind, ref.name)
+        except PluginError:
+            continue
+        then = f"{str(entry.get('package'))[:60]} {str(entry.get('version'))[:30]} code {str(entry.get('code'))[:16]}"
+        if (now["package"], now["version"], now["code"]) != (entry.get("package"), entry.get("version"), entry.get("code")):
+            changed.append(f"{kind}:{ref.name} ({then}; installed: {now['package']} {now['version']} code {now['code']})")
+    if not changed:
+        return None
+    more = f" and {len(changed) - 3} more" if len(changed) > 3 else ""
+    return "it was made by other plugin code than the installed one: " + "; ".join(changed[:3]) + more
 
 
 def _warn_unfinished(path: Path, data: dict[str, Any]) -> None:

@@ -198,6 +198,8 @@ def register_commands(app):  # type: ignore[no-untyped-def]
         stdout = Console(width=None if sys.stdout.isatty() else 160)
         stdout.print(out)
         stdout.print(f"success rate {100 * agg['success_rate']:.1f}% ({agg['succeeded']}/{agg['total']}); {PROTOCOL}")
+        if target_info.code_note is not None:  # the checkpoint's recorded plugin code against the installed code
+            console.print(f"note: {target}: {target_info.code_note}", style="yellow", markup=False, highlight=False, soft_wrap=True)
         if loaded.latent is not None and spec.imitator is not None and loaded.imitator is not loaded.policy:
             # PULSE Table 1 layout: the latent next to the imitator it was distilled from.
             teacher = evaluate_imitator(loaded.imitator, lib, make_sim, params, default_metrics(), console)

@@ -172,7 +172,11 @@ def evaluate_generation(
     decoder output to PD targets without a reference (see the module docstring).
     """
     if not latent.samples_prior:
-        raise ValueError(f"{type(latent).__name__} cannot generate: it has no prior to sample (LatentSpace.samples_prior)")
+        raise ValueError(
+            f"{type(latent).__name__} cannot generate: it has no prior to sample (LatentSpace.samples_prior is False); a latent "
+            "space that has one sets the class attribute samples_prior = True and implements random_action "
+            "(docs/plugins.md, 'What the framework calls, and when')"
+        )
     p = params
     gen = torch.Generator().manual_seed(p.seed)
     sim = make_sim(p.num_rollouts)

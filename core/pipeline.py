@@ -44,7 +44,18 @@ from mocap.plugins import PluginError, PluginSet
 from mocap.runlog import MetricsLogger
 from mocap.skeleton import Skeleton
 from mocap.spec import STAGES, ResolvedSpec, Spec, StageSpec
-from mocap.stage_keys import ARTIFACT_FORMAT, motion_fingerprint, resolved_stage_keys, stage_keys  # noqa: F401  (re-exported)
+from mocap.stage_keys import (  # noqa: F401  (re-exported)
+    ARTIFACT_FORMAT,
+    KEY_FILE,
+    earlier_keys,
+    key_change,
+    material_key,
+    motion_fingerprint,
+    resolved_stage_keys,
+    resolved_stage_materials,
+    stage_keys,
+    why_new_key,
+)
 
 DONE_FILE = "DONE.json"
 PUBLISHED_DIR = "published"  # files a stage publishes to the run directory, kept for reuse
@@ -216,6 +227,7 @@ class StageRecord:
     reused: bool
     seconds: float
     trained_seconds: float | None = None  # a reused artifact: how long its training took when it was made
+    why: str | None = None  # trained although this run directory had run the stage before: what changed
 
 
 class _StopFlag:
@@ -332,7 +344,9 @@ def _run_pipeline_locked(resolved: ResolvedSpec, plugins: PluginSet, out_dir: Pa
     device = dist.init(resolve_device(spec.device))  # under torchrun: join the group; this rank's device
     if dist.world_size() > 1:
         console.print(f"data-parallel: {dist.world_size()} processes ({device.type}); rank 0 writes {out_dir}", highlight=False)
-    keys = resolved_stage_keys(resolved, plugins)
+    materials = resolved_stage_materials(resolved, plugins)
+    keys = {stage: material_key(m) for stage, m in materials.items()}
+    earlier = earlier_keys(out_dir) if main else {}
     _preflight(resolved, plugins, keys, store)
     records: list[StageRecord] = []
     upstream: dict[str, StageResult] = {}
@@ -341,7 +355,8 @@ def _run_pipeline_locked(resolved: ResolvedSpec, plugins: PluginSet, out_dir: Pa
         for stage in STAGES:
             if stage not in keys:
                 continue
-            record = _run_stage(stage, keys[stage], resolved, plugins, out_dir, store, upstream, device, console, stop)
+            why = why_new_key(store, stage, earlier.get(stage), materials[stage]) if earlier.get(stage) not in (None, keys[stage]) else None
+            record = _run_stage(stage, keys[stage], resolved, plugins, out_dir, store, upstream, device, console, stop, (materials[stage], why))
             records.append(record)
             upstream[stage] = record.result
             if main:
@@ -373,13 +388,14 @@ def _run_stage(
     device: torch.device,
     console: Console,
     stop: _StopFlag,
+    key_info: tuple[dict[str, Any], str | None] = ({}, None),
 ) -> StageRecord:
     if dist.is_main():
         store.mkdir(parents=True, exist_ok=True)
     # data-parallel: rank 0 holds the lock for all ranks (the others follow its decisions)
     lock = _stage_lock(store / f".{stage}-{key}.lock", stage, console) if dist.is_main() else contextlib.nullcontext()
     with lock:
-        return _run_stage_locked(stage, key, resolved, plugins, out_dir, store, upstream, device, console, stop)
+        return _run_stage_locked(stage, key, resolved, plugins, out_dir, store, upstream, device, console, stop, key_info)
 
 
 @contextlib.contextmanager
@@ -411,7 +427,9 @@ def _run_stage_locked(
     device: torch.device,
     console: Console,
     stop: _StopFlag,
+    key_info: tuple[dict[str, Any], str | None] = ({}, None),
 ) -> StageRecord:
+    material, why = key_info
     spec = resolved.spec
     section = getattr(spec, stage)
     workdir = store / f"{stage}-{key}"
@@ -444,6 +462,9 @@ def _run_stage_locked(
     if main:
         workdir.mkdir(parents=True, exist_ok=True)
         atomic_write_text(workdir / "spec.yaml", resolved.to_yaml())
+        atomic_write_json(workdir / KEY_FILE, material)
+        if why:
+            console.print(f"[yellow]{stage}[/]: training again, its artifact key changed since this run directory's last run: {why}", highlight=False)
     dist.barrier()  # the stage directory exists for every rank
     log = MetricsLogger(out_dir / "metrics.jsonl", stage, tensorboard_dir=out_dir / "tb")  # writes on rank 0 only
     ctx = StageContext(
@@ -512,7 +533,7 @@ def _run_stage_locked(
                 "seconds": round(time.time() - t0, 2),
             },
         )
-    return StageRecord(stage, key, workdir, result, False, time.time() - t0)
+    return StageRecord(stage, key, workdir, result, False, time.time() - t0, why=why)
 
 
 def _read_result(done: Path) -> StageResult:
@@ -522,10 +543,10 @@ def _read_result(done: Path) -> StageResult:
 
 
 def _remove_if_empty(workdir: Path) -> None:
-    """Remove a stage folder that a failed first attempt left with nothing but its ``spec.yaml``
-    (no checkpoint, no output): it would only litter the artifact store."""
+    """Remove a stage folder that a failed first attempt left with nothing but its ``spec.yaml`` and
+    ``key.json`` (no checkpoint, no output): it would only litter the artifact store."""
     try:
-        items = [p for p in workdir.iterdir() if p.name != "spec.yaml"]
+        items = [p for p in workdir.iterdir() if p.name not in ("spec.yaml", KEY_FILE)]
     except OSError:
         return
     if not items:
@@ -555,6 +576,7 @@ def _write_stages(out_dir: Path, records: list[StageRecord], seed: int | None = 
                 "reused": r.reused,
                 "seconds": round(r.seconds, 2),
                 "trained_seconds": round(r.trained_seconds, 2) if r.trained_seconds is not None else None,
+                **({"retrained_because": r.why} if r.why else {}),
             }
             for r in records
         ],

@@ -20,6 +20,7 @@ and documenting components (``mocap --help``, ``mocap validate``, ``mocap switch
 
 from __future__ import annotations
 
+import hashlib
 import importlib
 import inspect
 import os
@@ -136,6 +137,14 @@ class Component:
         """The factory itself: a :func:`lazy` one imported (for inspecting its signature)."""
         return self.factory.resolve() if isinstance(self.factory, LazyFactory) else self.factory
 
+    def code_modules(self) -> tuple[str, ...]:
+        """The modules holding this component's code, without importing them: its factory's (a
+        :func:`lazy` factory's target module) (:meth:`PluginSet.code_of` adds the registering plugin's)."""
+        if isinstance(self.factory, LazyFactory):
+            return (self.factory.target.partition(":")[0],)
+        module = inspect.getmodule(self.factory)
+        return (module.__name__,) if module is not None else ()
+
     def build(self, params: BaseModel | dict[str, Any] | None = None, **kwargs: Any) -> Any:
         if not isinstance(params, BaseModel) and self.params is not None:
             params = self.params.model_validate(params or {})
@@ -149,6 +158,8 @@ class PluginInfo:
     version: str
     hooks: tuple[str, ...]
     module: str
+    #: the module the plugin object is defined in (its code's package enters the stage keys)
+    code_module: str = ""
 
 
 @dataclass(frozen=True)
@@ -191,19 +202,36 @@ class PluginSet:
                 )
 
     def provenance(self) -> dict[str, dict[str, str]]:
-        """``{"<kind>:<name>": {"plugin", "package", "version"}}`` of every registered component: what a
-        checkpoint records, so that a reader without the plugin learns which package to install."""
-        info = {p.name: p for p in self.plugins}
+        """``{"<kind>:<name>": {"plugin", "package", "version", "code"}}`` of every registered component:
+        what a checkpoint records, so that a reader without the plugin learns which package to install
+        and ``mocap eval`` can tell whether other code made it (``code``: :meth:`code_of`)."""
         out: dict[str, dict[str, str]] = {}
         for kind, comps in self.components.items():
             for name, comp in comps.items():
-                owner = info.get(comp.plugin)
-                out[f"{kind}:{name}"] = {
-                    "plugin": comp.plugin,
-                    "package": owner.package if owner else "",
-                    "version": owner.version if owner else "",
-                }
+                code = self._code(comp)
+                out[f"{kind}:{name}"] = {"plugin": comp.plugin, "package": code["package"], "version": code["version"], "code": code["code"]}
         return out
+
+    def code_of(self, kind: str, name: str) -> dict[str, str]:
+        """The code fingerprint of a registered component: ``{"package", "version", "code"}``, where
+        ``code`` is a short sha256 over the source files of every top-level package holding its
+        code (the registering plugin's and its factory's; :func:`mocap.fingerprint.package_digest`).
+        Editing any file of those packages, or installing another version, changes it."""
+        return self._code(self.get(kind, name))
+
+    def _code(self, comp: Component) -> dict[str, str]:
+        from mocap.fingerprint import package_digest
+
+        owner = next((p for p in self.plugins if p.name == comp.plugin), None)
+        modules = [*comp.code_modules(), owner.code_module if owner is not None else ""]
+        tops = sorted({m.split(".", 1)[0] for m in modules if m})
+        h = hashlib.sha256("".join(f"{top}={package_digest(top)}\n" for top in tops).encode())
+        return {
+            "package": owner.package if owner else "",
+            "version": owner.version if owner else "",
+            "code": h.hexdigest()[:16],
+            "modules": ",".join(tops),
+        }
 
     def commands(self, app: Any) -> None:
         """Let every plugin add its CLI commands (failures are recorded, not raised)."""
@@ -292,7 +320,8 @@ def load_plugins(
             continue
         hook_names = tuple(sorted(impl.name for impl in _impls_of(pm, plugin)))
         module = getattr(plugin, "__name__", type(plugin).__name__)
-        pset.plugins.append(PluginInfo(name, package, version, hook_names, module))
+        home = inspect.getmodule(plugin)
+        pset.plugins.append(PluginInfo(name, package, version, hook_names, module, home.__name__ if home is not None else ""))
 
     _collect(pset)
     return pset

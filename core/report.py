@@ -87,6 +87,9 @@ def render_report(
         trained = r.trained_seconds if r.reused else (r.seconds if trainer != "-" else None)
         shown = f"{trained:.1f} s" if trained is not None else "-"
         lines.append(f"| {r.stage} | {component} | {trainer} | `{r.workdir.name}` | {'yes' if r.reused else 'no'} | {r.seconds:.1f} | {shown} |")
+    retrained = [r for r in records if r.why]
+    if retrained:
+        lines += [""] + [f"- {r.stage} trained again: {r.why}" for r in retrained]
     for r in records:
         if not r.result.metrics:
             continue

@@ -111,6 +111,20 @@ def make_scratch(params: ScratchParams, *, skeleton: Skeleton, checkpoint: Any =
 
 
 # ------------------------------------------------------------------------------------- env
+def stateless_task_warning(task: Task) -> str | None:
+    """The warning a resume gives for a task that keeps the default :meth:`Task.state_dict` (it
+    saves nothing): its goals, timers and generators restart, so the resumed stage diverges from an
+    uninterrupted one. None for a task that defines its own state."""
+    if type(task).state_dict is not Task.state_dict:
+        return None
+    name = type(task).__name__
+    return (
+        f"warning: resuming task {name}, which defines no state_dict(): its per-env goals, timers and generators restart now, "
+        f"so this run will differ from an uninterrupted one. Add {name}.state_dict() returning them and load_state_dict() "
+        "restoring them (docs/plugins.md, 'What the framework calls, and when'; mocap.testing.check_task checks the round trip)"
+    )
+
+
 class TaskEnv:
     """A batched downstream task driven through a frozen latent space (module docstring)."""
 
@@ -125,8 +139,11 @@ class TaskEnv:
         seed: int = 0,
         sixd: SixD = "zhou",
         start_min_height: float = 0.25,
+        warn: Callable[[str], None] | None = None,
     ):
+        """``warn``: where a resume's warnings go (the stage's console; default: Python's warnings)."""
         self.task, self.latent, self.map_targets = task, latent, to_pd_targets
+        self._warn = warn
         self.library, self.sim = library, sim
         self.num_envs = int(sim.num_envs)
         self.skeleton = sim.skeleton
@@ -264,6 +281,14 @@ class TaskEnv:
         if "prior_generator" in state:
             self._prior_gen.set_state(state["prior_generator"].clone())
         load_sim_state(self.sim, torch.arange(self.num_envs), state)
+        message = stateless_task_warning(self.task)
+        if message is not None:
+            if self._warn is not None:
+                self._warn(message)
+            else:
+                import warnings
+
+                warnings.warn(message, RuntimeWarning, stacklevel=2)
         if "task" in state:
             self.task.load_state_dict(state["task"])
         if "latent" in state:
@@ -322,7 +347,7 @@ def make_task_env(ctx: Any, num_envs: int) -> TaskEnv:
         sim_params = type(sim_params).model_validate({**sim_params.model_dump(), **overrides})
     sim = ctx.plugins.get("simulator", sim_ref.name).build(sim_params, skeleton=skeleton, num_envs=num_envs, seed=ctx.seed)
     try:
-        env = TaskEnv(task, latent, mapping, library, sim, seed=ctx.seed)
+        env = TaskEnv(task, latent, mapping, library, sim, seed=ctx.seed, warn=lambda text: ctx.console.print(text, style="yellow", markup=False))
     except ValueError as exc:  # e.g. the generation task with scratch (no prior)
         sim.close()
         raise StageFailed(f"task {task_ref.name} with latent {spec.latent.name}: {exc}") from None

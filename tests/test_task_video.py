@@ -64,7 +64,7 @@ def test_task_eval_counts_every_env_step_and_is_deterministic(task_run: Path, tm
     out = tmp_path / "eval.json"
     result = invoke(["task-eval", task_run, "--envs", "3", "--seconds", "1", "--json", out])
     assert result.exit_code == 0, result.output
-    assert "task strike through scratch" in result.stdout and "| hit_rate |" in result.stdout
+    assert "task strike through scratch" in result.stdout and "| `hit_rate` |" in result.stdout
     r = json.loads(out.read_text())
     assert r["task"] == "strike" and r["latent"] == "scratch" and r["num_envs"] == 3
     assert r["env_steps"] == 90 and r["steps"] == 90  # 3 envs x 30 control steps, each counted by the task once
@@ -180,7 +180,7 @@ def test_eval_suite_evaluates_the_task_stage(tmp_path: Path):
     metrics = stages["eval"]["metrics"]
     assert metrics["task_eval/env_steps"] == 45 and metrics["task_eval/steps"] == 45  # 3 envs x 15 control steps
     assert 0.0 <= metrics["task_eval/reward"] <= 1.0 and "task_eval/video" not in metrics
-    assert "| reward |" in (run / "task_eval.md").read_text() and (run / "task.mp4").stat().st_size > 0
+    assert "| mean reward | `reward` |" in (run / "task_eval.md").read_text() and (run / "task.mp4").stat().st_size > 0
     # the same numbers as `mocap task-eval` of the run with the eval stage's seed
     from mocap.task_eval import evaluate_task
 

@@ -1,0 +1,83 @@
+"""What a plugin author meets at the edges (issue 66 items 2-5): the conformance example of
+``docs/plugins.md`` runs verbatim, every contract failure says what to do, a resumed task without
+state is warned about at once, and ``mocap task-eval`` shows display names and units."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+import torch
+from test_distill import walk  # noqa: F401  (fixture)
+from test_hierarchy import Upright, UprightParams, _env
+
+from mocap.generation import GenerationParams
+from mocap.generation_eval import evaluate_generation
+from mocap.hierarchy import ScratchParams
+from mocap.metric_display import MetricInfo
+from mocap.plugins import get_plugins
+from mocap.state import Observations
+from mocap.task_env import ScratchLatent, stateless_task_warning
+from mocap.task_eval import render_task_eval
+from mocap.testing import ContractViolation, check_latent_space, check_task, fake_sim_state
+
+DOCS = Path(__file__).resolve().parents[1] / "docs" / "plugins.md"
+
+
+def test_the_conformance_example_of_the_plugin_docs_runs_verbatim(capsys: pytest.CaptureFixture[str]) -> None:
+    blocks = re.findall(r"```python\n(.*?)```", DOCS.read_text(encoding="utf-8"), flags=re.S)
+    example = [b for b in blocks if "check_latent_space" in b and "check_task" in b]
+    assert len(example) == 1, "docs/plugins.md has one conformance example"
+    exec(compile(example[0], str(DOCS), "exec"), {"__name__": "docs_example"})
+    out = capsys.readouterr().out
+    assert "state_dict round-trip" in out and "task state round-trip" in out
+
+
+def test_a_task_that_forgets_its_goals_is_told_what_to_add(amp) -> None:  # type: ignore[no-untyped-def]
+    task = get_plugins().get("task", "speed").build(None, skeleton=amp, num_envs=4, device="cpu")
+    task.load_state_dict = lambda state: None  # type: ignore[method-assign]
+    with pytest.raises(ContractViolation, match=r"does not restore the goals: return every per-env goal.*Task.state_dict\(\).*docs/plugins.md"):
+        check_task(task, amp, num_envs=4)
+
+
+def test_resuming_a_task_without_state_warns_at_once(amp, walk) -> None:  # type: ignore[no-untyped-def]  # noqa: F811
+    assert stateless_task_warning(get_plugins().get("task", "speed").build(None, skeleton=amp, num_envs=2, device="cpu")) is None
+    message = stateless_task_warning(Upright(UprightParams(), 2))
+    assert message is not None and "Upright" in message and "state_dict()" in message and "docs/plugins.md" in message
+    env = _env(amp, walk, ScratchLatent(ScratchParams(), amp))
+    try:
+        env.reset()
+        saved = env.state_dict()
+        with pytest.warns(RuntimeWarning, match="resuming task Upright, which defines no state_dict"):
+            env.load_state_dict(saved)
+    finally:
+        env.close()
+
+
+class PriorWithoutFlag(ScratchLatent):
+    """Samples something but forgot ``samples_prior = True``."""
+
+    def random_action(self, obs: Observations, noise_scale: float = 1.0, generator: torch.Generator | None = None) -> torch.Tensor:
+        return torch.zeros(obs.proprio.shape[0], self.latent_dim)
+
+
+def test_random_action_without_samples_prior_is_named_with_the_flag_to_set(amp) -> None:  # type: ignore[no-untyped-def]
+    from mocap.observations import proprioception_and_goal
+
+    latent = PriorWithoutFlag(ScratchParams(), amp)
+    proprio, goal = proprioception_and_goal(fake_sim_state(amp, 3), fake_sim_state(amp, 3, seed=1))
+    with pytest.raises(ContractViolation, match="defines random_action but leaves samples_prior False.*samples_prior = True"):
+        check_latent_space(latent, Observations(proprio=proprio.float(), goal=goal.float()), amp.num_dofs)
+    with pytest.raises(ValueError, match=r"cannot generate: it has no prior to sample.*set.*samples_prior = True.*docs/plugins.md"):
+        evaluate_generation(latent, None, lambda obs, out: out, None, lambda n: None, GenerationParams())  # type: ignore[arg-type]
+
+
+def test_task_eval_table_shows_display_names_and_units() -> None:
+    result = {"task": "speed", "latent": "pulse", "protocol": "p", "speed_error": 1.25, "episode_length": 300.0, "mystery": 2.0, "seed": 0}
+    table = render_task_eval(result, {"speed_error": MetricInfo("speed error", "m/s")})
+    assert "| speed error (m/s) | `speed_error` | 1.25 |" in table
+    assert "| episode length (ended episodes) (control steps) | `episode_length` | 300 |" in table
+    assert "| mystery | `mystery` | 2 |" in table  # undeclared: the key itself
+    # the installed tasks' declarations by default
+    assert "speed error (m/s)" in render_task_eval(result)
