@@ -12,7 +12,10 @@ at the episode length), and reports:
   ended by termination (for every built-in task a fall, or an unstable step);
 * ``envs_never_terminated``: the share of the envs that ran the whole window without a termination;
 * ``episode_return`` / ``episode_length`` (control steps): means over the ended episodes (NaN if none);
-* ``env_steps``, ``seconds``, ``num_envs``, ``seed``, ``start_clips`` (None: the spec's motions).
+* ``env_steps``, ``seconds``, ``num_envs``, ``seed``, ``start_clips`` (None: the spec's motions);
+* how natural the motion is (:mod:`mocap.naturalness`): ``mm_distance`` and ``mm_within`` (motion
+  matching against the run's motion set at the control rate; with ``start_clips``, those clips),
+  ``foot_skating`` (m/s), ``root_jerk`` (m/s³), ``crouch_share``.
 
 ``start_clips`` (``mocap task-eval --start-clips walk,run``) starts every episode from frames of those
 clips instead of the run's motion set: a policy trained from every clip's frames can be measured from
@@ -30,6 +33,8 @@ import torch
 
 from mocap.metric_display import MetricInfo
 
+from mocap.generation_eval import dataset_transitions
+from mocap.naturalness import NATURALNESS_ROWS, NaturalnessRecorder
 from mocap.task_run import TaskRun, open_task_run
 
 
@@ -64,6 +69,8 @@ def evaluate_task_run(run: TaskRun, *, seconds: float = 10.0, video: Path | None
     rec_steps = min(steps, int(round(video_seconds / float(env.sim.dt)))) if recorder is not None else 0
     obs = env.reset()
     env.task.metrics()  # drop anything the reset accumulated
+    natural = NaturalnessRecorder(env.skeleton, dataset_transitions(env.library, float(env.sim.dt), env.sixd), float(env.sim.dt), sixd=env.sixd)
+    natural.add(env.sim.state)
     ever_terminated = torch.zeros(num_envs, dtype=torch.bool)
     returns: list[torch.Tensor] = []
     lengths: list[torch.Tensor] = []
@@ -77,6 +84,7 @@ def evaluate_task_run(run: TaskRun, *, seconds: float = 10.0, video: Path | None
         term = result.terminated.bool().cpu()
         done = term | result.truncated.bool().cpu()
         ever_terminated |= term
+        natural.add(env.sim.state, fresh=done)  # a finished env's state is already its next episode's first
         ended += int(done.sum())
         terminated += int(term.sum())
         if "return" in result.episodes:
@@ -100,6 +108,7 @@ def evaluate_task_run(run: TaskRun, *, seconds: float = 10.0, video: Path | None
         "env_steps": steps * num_envs,
         "seconds": steps * dt,
         "num_envs": num_envs,
+        **natural.result(),
         "protocol": "deterministic task policy (mean action), episodes restart on termination or at the episode length",
     }
     if recorder is not None and video is not None and rec_steps:
@@ -118,6 +127,7 @@ OWN_ROWS: dict[str, tuple[str, str]] = {
     "env_steps": ("env steps", ""),
     "seconds": ("simulated time per env", "s"),
     "num_envs": ("envs", ""),
+    **NATURALNESS_ROWS,
 }
 
 
