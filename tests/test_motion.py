@@ -44,6 +44,23 @@ def _write_json(path: Path, doc: object) -> Path:
 
 
 # ------------------------------------------------------------------------------------ DeepMimic
+def test_the_walker_clips_load_by_name_and_only_when_named(amp):
+    """pybullet's five walker clips (issue 61): named in ``clips``, same format and skeleton; the
+    default set stays the 15 bundled clips; a name that is neither is refused listing both."""
+    from mocap.motion.deepmimic import LOCOMOTION_CLIPS, WALKER_CLIPS
+
+    loco = DeepMimicSource(DeepMimicParams(clips=list(LOCOMOTION_CLIPS))).load(amp)
+    assert loco.names == ["walk", "run", *WALKER_CLIPS] and loco.skipped == []
+    for clip in loco.clips[2:]:
+        assert clip.fps == 30.0 and clip.loop and clip.num_frames == 38
+        assert 0.8 < float(clip.root_pos[:, 2].mean()) < 0.9  # upright, like the bundled walk
+    turns = {c.name: float(c.root_pos[-1, 1] - c.root_pos[0, 1]) for c in loco.clips if "turn" in c.name}
+    assert all(v > 0.2 for k, v in turns.items() if "left" in k) and all(v < -0.2 for k, v in turns.items() if "right" in k)
+    assert DeepMimicSource(DeepMimicParams()).load(amp).names == list(CLIP_NAMES)
+    with pytest.raises(ValueError, match="walker_turn_left0"):
+        DeepMimicParams(clips=["walker_sideways"])
+
+
 def test_all_bundled_clips_load(bundled):
     assert bundled.names == list(CLIP_NAMES)
     assert bundled.skipped == []

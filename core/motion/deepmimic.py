@@ -59,6 +59,19 @@ CLIP_NAMES: tuple[str, ...] = (
 )
 FILE_PREFIX = "humanoid3d_"
 
+#: The five DeepMimic walker clips pybullet also ships (``data/motions/walker/``, same format and
+#: skeleton, zlib licence): a forward walk and turns to either side. Named in ``clips`` like the
+#: bundled ones; not loaded by default (``clips: null`` is the 15 ``humanoid3d_*`` clips).
+WALKER_CLIPS: dict[str, str] = {
+    "walker_forward": "walker/0walk_forward.txt",
+    "walker_turn_left0": "walker/turn_left0.txt",
+    "walker_turn_left1": "walker/turn_left1.txt",
+    "walker_turn_right0": "walker/turn_right0.txt",
+    "walker_turn_right1": "walker/turn_right1.txt",
+}
+#: The locomotion clips: the bundled walk and run and the five walker clips.
+LOCOMOTION_CLIPS: tuple[str, ...] = ("walk", "run", *WALKER_CLIPS)
+
 #: DeepMimic joints in frame order after the root: (our body name, number of values).
 JOINT_BODIES: tuple[tuple[str, int], ...] = (
     ("torso", 4),  # chest
@@ -240,8 +253,8 @@ class DeepMimicParams(ReferenceVelocityParams):
 
     clips: list[str] | None = Field(
         default=None,
-        description=f"clip names (file stem without '{FILE_PREFIX}'; bundled: {', '.join(CLIP_NAMES)}), "
-        "or paths of .txt files; None loads every humanoid3d_*.txt file of data_dir",
+        description=f"clip names (file stem without '{FILE_PREFIX}'; bundled: {', '.join(CLIP_NAMES)}; walker clips: "
+        f"{', '.join(WALKER_CLIPS)}), or paths of .txt files; None loads every humanoid3d_*.txt file of data_dir",
     )
     data_dir: Path | None = Field(default=None, description="folder of the motion files (default: pybullet_data's data/motions)")
     skip_bad: bool = Field(default=False, description="skip unusable files (listed in the motion set) instead of failing")
@@ -249,9 +262,10 @@ class DeepMimicParams(ReferenceVelocityParams):
     @model_validator(mode="after")
     def _known_names(self) -> "DeepMimicParams":
         if self.data_dir is None and self.clips is not None:
-            unknown = [c for c in self.clips if c not in CLIP_NAMES and not c.endswith(".txt")]
+            unknown = [c for c in self.clips if c not in CLIP_NAMES and c not in WALKER_CLIPS and not c.endswith(".txt")]
             if unknown:
-                raise ValueError(f"unknown DeepMimic clip(s) {', '.join(map(repr, unknown))}; available: {', '.join(CLIP_NAMES)}")
+                names = ", ".join((*CLIP_NAMES, *WALKER_CLIPS))
+                raise ValueError(f"unknown DeepMimic clip(s) {', '.join(map(repr, unknown))}; available: {names}")
         return self
 
 
@@ -287,6 +301,8 @@ class DeepMimicSource(MotionSource):
                 out.append((p, p.stem.removeprefix(FILE_PREFIX)))
             elif c in available:
                 out.append((self.data_dir / f"{FILE_PREFIX}{c}.txt", c))
+            elif c in WALKER_CLIPS and (self.data_dir / WALKER_CLIPS[c]).is_file():
+                out.append((self.data_dir / WALKER_CLIPS[c], c))
             else:
                 raise MotionDataError(f"unknown DeepMimic clip {c!r} in {self.data_dir}; available: {', '.join(available) or '(none)'}")
         return out
