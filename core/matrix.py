@@ -363,8 +363,16 @@ def comparison(cells: list[Cell], out_dir: Path, seed_axis: str = "seed") -> dic
     data: dict[str, Any] = {"cells": rows, "groups": summary}
     plots = _plots(groups, summary, out_dir)
     data["plots"] = [name for name, _ in plots if name]
+    from mocap.sample_efficiency import efficiency, read_curve, render_efficiency
+
+    curves = {key: [read_curve(out_dir / n / "metrics.jsonl") for n in names] for key, names in groups.items()}
+    curves = {key: [c for c in cs if len(c[0])] for key, cs in curves.items()}
+    section = ""
+    if any(curves.values()):  # a task stage logged its normalized return: PULSE Fig. 4's quantities
+        data["efficiency"] = efficiency({k: cs for k, cs in curves.items() if cs})
+        section = render_efficiency(data["efficiency"])
     (out_dir / "comparison.json").write_text(json.dumps(data, indent=2) + "\n")
-    (out_dir / "comparison.md").write_text(render(summary) + render_plots(plots))
+    (out_dir / "comparison.md").write_text(render(summary) + section + render_plots(plots))
     return data
 
 
