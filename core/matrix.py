@@ -429,6 +429,11 @@ KEY_METRICS = (
     "eval/task_eval/distance",
     "eval/task_eval/hit_rate",
     "eval/task_eval/envs_never_terminated",
+    # how natural the task policy moves (mocap.naturalness)
+    "eval/task_eval/mm_distance",
+    "eval/task_eval/mm_within",
+    "eval/task_eval/foot_skating",
+    "eval/task_eval/crouch_share",
 )
 
 

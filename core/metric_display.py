@@ -42,6 +42,25 @@ class MetricInfo:
         raise ValueError(f"metric {key!r}: declare MetricInfo(display, unit), (display, unit) or a display name, got {value!r}")
 
 
+#: display names and units of the rows ``mocap task-eval`` adds to a task's own metrics
+#: (:mod:`mocap.task_eval`), the naturalness measurements among them (:mod:`mocap.naturalness`)
+TASK_EVAL_INFO: dict[str, MetricInfo] = {
+    "episodes_ended": MetricInfo("episodes ended in the window"),
+    "terminated_share": MetricInfo("share of ended episodes that terminated (falls)"),
+    "envs_never_terminated": MetricInfo("share of envs never terminated"),
+    "episode_return": MetricInfo("episode return (ended episodes)"),
+    "episode_length": MetricInfo("episode length (ended episodes)", "control steps"),
+    "env_steps": MetricInfo("env steps"),
+    "seconds": MetricInfo("simulated time per env", "s"),
+    "num_envs": MetricInfo("envs"),
+    "mm_distance": MetricInfo("motion-matching distance per feature", "std²"),
+    "mm_within": MetricInfo("share of transitions within the matching threshold"),
+    "foot_skating": MetricInfo("foot skating in contact", "m/s"),
+    "root_jerk": MetricInfo("root jerk", "m/s³"),
+    "crouch_share": MetricInfo("share of frames crouched (pelvis low)"),
+}
+
+
 def declared_metrics(plugins: "PluginSet | None" = None) -> dict[str, MetricInfo]:
     """Every registered component's metric declarations (``plugins``: the process-wide set when None);
     the first declaration of a name wins (core registers first)."""
@@ -68,7 +87,7 @@ def metric_label(key: str, declared: Mapping[str, MetricInfo] | None = None) -> 
     ``declared``: :func:`declared_metrics` of the process-wide plugins when None."""
     parts = key.split("/")
     name = parts[-1]
-    table = declared_metrics() if declared is None else declared
+    table = {**TASK_EVAL_INFO, **(declared_metrics() if declared is None else declared)}
     if name not in table:
         return key
     info = table[name]

@@ -39,14 +39,8 @@ from mocap.observations import SixD, proprioception
 from mocap.skeleton import Skeleton
 from mocap.state import HumanoidState
 
-#: display names and units of the keys :meth:`NaturalnessRecorder.result` reports
-NATURALNESS_ROWS: dict[str, tuple[str, str]] = {
-    "mm_distance": ("motion-matching distance per feature", "std²"),
-    "mm_within": ("share of transitions within the matching threshold", ""),
-    "foot_skating": ("foot skating in contact", "m/s"),
-    "root_jerk": ("root jerk", "m/s³"),
-    "crouch_share": ("share of frames crouched (pelvis low)", ""),
-}
+#: the keys :meth:`NaturalnessRecorder.result` reports (display names and units: ``mocap.metric_display.TASK_EVAL_INFO``)
+NATURALNESS_KEYS: tuple[str, ...] = ("mm_distance", "mm_within", "foot_skating", "root_jerk", "crouch_share")
 
 
 @dataclass(frozen=True)
@@ -120,7 +114,7 @@ class NaturalnessRecorder:
     def result(self) -> dict[str, float]:
         """The module docstring's keys (NaN where nothing was measured)."""
         s = self._sums
-        out = {k: math.nan for k in NATURALNESS_ROWS}
+        out = {k: math.nan for k in NATURALNESS_KEYS}
         transitions = torch.cat(self._features) if self._features else torch.zeros(0)
         if transitions.numel():
             per_feature = nearest_per_feature(transitions, self.dataset)
@@ -135,4 +129,4 @@ class NaturalnessRecorder:
         return out
 
 
-__all__ = ["NATURALNESS_ROWS", "NaturalnessParams", "NaturalnessRecorder", "nearest_per_feature"]
+__all__ = ["NATURALNESS_KEYS", "NaturalnessParams", "NaturalnessRecorder", "nearest_per_feature"]

@@ -34,7 +34,7 @@ import torch
 from mocap.metric_display import MetricInfo
 
 from mocap.generation_eval import dataset_transitions
-from mocap.naturalness import NATURALNESS_ROWS, NaturalnessRecorder
+from mocap.naturalness import NaturalnessRecorder
 from mocap.task_run import TaskRun, open_task_run
 
 
@@ -117,24 +117,10 @@ def evaluate_task_run(run: TaskRun, *, seconds: float = 10.0, video: Path | None
     return out
 
 
-#: display names and units of the rows task-eval adds to the task's own metrics
-OWN_ROWS: dict[str, tuple[str, str]] = {
-    "episodes_ended": ("episodes ended in the window", ""),
-    "terminated_share": ("share of ended episodes that terminated (falls)", ""),
-    "envs_never_terminated": ("share of envs never terminated", ""),
-    "episode_return": ("episode return (ended episodes)", ""),
-    "episode_length": ("episode length (ended episodes)", "control steps"),
-    "env_steps": ("env steps", ""),
-    "seconds": ("simulated time per env", "s"),
-    "num_envs": ("envs", ""),
-    **NATURALNESS_ROWS,
-}
-
-
 def render_task_eval(result: dict[str, Any], declared: Mapping[str, MetricInfo] | None = None) -> str:
     """A Markdown table of one :func:`evaluate_task` result: each row's display name and unit (the
-    task's declared metrics, :func:`mocap.metric_display.metric_label`; :data:`OWN_ROWS`), its key
-    and its value. ``declared``: the installed plugins' declarations when None."""
+    task's declared metrics and task-eval's own rows, :func:`mocap.metric_display.metric_label`), its
+    key and its value. ``declared``: the installed plugins' declarations when None."""
     from mocap.metric_display import metric_label
 
     skip = {"task", "latent", "policy", "protocol", "seed", "video", "start_clips"}
@@ -142,11 +128,7 @@ def render_task_eval(result: dict[str, Any], declared: Mapping[str, MetricInfo] 
     for key, value in result.items():
         if key in skip:
             continue
-        if key in OWN_ROWS:
-            name, unit = OWN_ROWS[key]
-            label = f"{name} ({unit})" if unit else name
-        else:
-            label = metric_label(key, declared)
+        label = metric_label(key, declared)
         shown = f"{value:.4g}" if isinstance(value, float) else str(value)
         rows.append(f"| {label} | `{key}` | {shown} |")
     head = f"task {result['task']} through {result['latent']} ({result['protocol']})"
