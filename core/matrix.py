@@ -434,6 +434,7 @@ KEY_METRICS = (
     "eval/task_eval/mm_within",
     "eval/task_eval/foot_skating",
     "eval/task_eval/crouch_share",
+    "eval/task_eval/realism",
 )
 
 

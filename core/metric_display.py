@@ -58,6 +58,7 @@ TASK_EVAL_INFO: dict[str, MetricInfo] = {
     "foot_skating": MetricInfo("foot skating in contact", "m/s"),
     "root_jerk": MetricInfo("root jerk", "m/s³"),
     "crouch_share": MetricInfo("share of frames crouched (pelvis low)"),
+    "realism": MetricInfo("realism (fixed judge's score, 1 = like the data)"),
 }
 
 

@@ -21,7 +21,9 @@ frame of every episode (a new episode breaks the pairs and windows that would st
 * ``root_jerk``: mean norm of the root position's third finite difference over four consecutive
   frames, divided by dt³ (m/s³).
 * ``crouch_share``: share of frames with the root (pelvis) below ``crouch_fraction`` × its rest-pose
-  height (default 0.8: 0.71 m for ``amp``).
+  height (default 0.8: 0.71 m for ``amp``);
+* ``realism`` (with a judge, :mod:`mocap.realism`): the fixed judge's mean score of the transitions,
+  in (0, 1), near 1 for the motion data.
 
 Falls are the task env's terminations (``terminated_share`` in task-eval). Every value is NaN when
 the rollout had no frame, pair or window to measure it on.
@@ -31,6 +33,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import torch
 from torch import Tensor
@@ -68,9 +71,11 @@ def nearest_per_feature(generated: Tensor, dataset: Tensor, chunk: int = 4096) -
 class NaturalnessRecorder:
     """Accumulates the module docstring's measurements over a batch of N envs, step by step."""
 
-    def __init__(self, skeleton: Skeleton, dataset: Tensor, dt: float, params: NaturalnessParams | None = None, sixd: SixD = "zhou"):
+    def __init__(self, skeleton: Skeleton, dataset: Tensor, dt: float, params: NaturalnessParams | None = None, sixd: SixD = "zhou", judge: Any = None):
+        """``judge``: a :class:`mocap.realism.RealismJudge` for ``realism`` (None: not reported)."""
         from mocap.humanoids.common import rest_body_positions, rest_root_height
 
+        self.judge = judge
         self.params = params or NaturalnessParams()
         self.dataset, self.dt, self.sixd = dataset.float(), float(dt), sixd
         self.feet = [skeleton.body_names.index(f) for f in skeleton.feet]
@@ -120,6 +125,8 @@ class NaturalnessRecorder:
             per_feature = nearest_per_feature(transitions, self.dataset)
             out["mm_distance"] = float(per_feature.mean())
             out["mm_within"] = float((per_feature <= self.params.match_threshold).double().mean())
+            if self.judge is not None:
+                out["realism"] = float(self.judge.score(transitions).mean())
         if s["skating_n"]:
             out["foot_skating"] = s["skating"] / s["skating_n"]
         if s["jerk_n"]:

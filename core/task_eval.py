@@ -15,7 +15,8 @@ at the episode length), and reports:
 * ``env_steps``, ``seconds``, ``num_envs``, ``seed``, ``start_clips`` (None: the spec's motions);
 * how natural the motion is (:mod:`mocap.naturalness`): ``mm_distance`` and ``mm_within`` (motion
   matching against the run's motion set at the control rate; with ``start_clips``, those clips),
-  ``foot_skating`` (m/s), ``root_jerk`` (m/s³), ``crouch_share``.
+  ``foot_skating`` (m/s), ``root_jerk`` (m/s³), ``crouch_share``, and ``realism`` when the committed
+  judge fits the humanoid (:func:`realism_judge`).
 
 ``start_clips`` (``mocap task-eval --start-clips walk,run``) starts every episode from frames of those
 clips instead of the run's motion set: a policy trained from every clip's frames can be measured from
@@ -69,7 +70,8 @@ def evaluate_task_run(run: TaskRun, *, seconds: float = 10.0, video: Path | None
     rec_steps = min(steps, int(round(video_seconds / float(env.sim.dt)))) if recorder is not None else 0
     obs = env.reset()
     env.task.metrics()  # drop anything the reset accumulated
-    natural = NaturalnessRecorder(env.skeleton, dataset_transitions(env.library, float(env.sim.dt), env.sixd), float(env.sim.dt), sixd=env.sixd)
+    dataset = dataset_transitions(env.library, float(env.sim.dt), env.sixd)
+    natural = NaturalnessRecorder(env.skeleton, dataset, float(env.sim.dt), sixd=env.sixd, judge=realism_judge(env.skeleton.name, dataset.shape[1]))
     natural.add(env.sim.state)
     ever_terminated = torch.zeros(num_envs, dtype=torch.bool)
     returns: list[torch.Tensor] = []
@@ -115,6 +117,18 @@ def evaluate_task_run(run: TaskRun, *, seconds: float = 10.0, video: Path | None
         recorder.save(video)
         out["video"] = str(video)
     return out
+
+
+def realism_judge(humanoid: str, feature_dim: int) -> Any:
+    """The committed realism judge (``checkpoints/realism_judge/judge.pt``, :mod:`mocap.realism`) when
+    it is there and was trained on this humanoid's features (the ``amp`` humanoid); else None."""
+    from mocap.realism import default_judge_path, load_judge
+
+    path = default_judge_path()
+    if humanoid != "amp" or not path.is_file():
+        return None
+    judge = load_judge(path)
+    return judge if judge.feature_dim == feature_dim else None
 
 
 def render_task_eval(result: dict[str, Any], declared: Mapping[str, MetricInfo] | None = None) -> str:
