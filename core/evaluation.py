@@ -170,6 +170,7 @@ def register_commands(app):  # type: ignore[no-untyped-def]
         from mocap.paths import safe_filename
         from mocap.plugins import get_plugins
 
+        check_eval_options(num_envs, loop)
         console = Console(stderr=True)
         plugins = get_plugins()
         target_info = load_evaluation_target(target, plugins)
@@ -219,6 +220,19 @@ def register_commands(app):  # type: ignore[no-untyped-def]
                     console.print("[yellow]videos skipped[/]: the simulator cannot render")
                     break
                 console.print(f"video: {path}")
+
+
+def check_eval_options(num_envs: int, loop: float | None) -> None:
+    """``mocap eval``'s counts, checked before anything loads: one :class:`~mocap.errors.UserError`
+    line naming the option (not the protocol params' validation error)."""
+    import math
+
+    from mocap.errors import UserError
+
+    if num_envs < 1:
+        raise UserError(f"--num-envs {num_envs}: give the number of clips simulated in parallel, at least 1")
+    if loop is not None and not (math.isfinite(loop) and loop > 0):
+        raise UserError(f"--loop {loop}: give the seconds looping clips keep cycling, a positive finite number")
 
 
 @hookimpl
