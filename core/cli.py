@@ -203,19 +203,11 @@ def cmd_schema(
 
 
 def write_user_file(path: Path, text: str, option: str) -> None:
-    """Write ``text`` to a file the user named; a path that cannot be written (a missing folder, a
-    directory, no permission, a full disk) is a :class:`UserError` naming it, not a traceback."""
-    from mocap.checkpoint import StorageError, atomic_write_text
+    """Write ``text`` to a file the user named: :func:`mocap.paths.write_output_text` (a path that
+    cannot be written is a :class:`UserError` naming it, not a traceback)."""
+    from mocap.paths import write_output_text
 
-    path = Path(path)
-    if path.is_dir():
-        raise UserError(f"{option} {path}: a directory; give a file name (e.g. {path / 'mocap.schema.json'})")
-    if not path.parent.is_dir():
-        raise UserError(f"{option} {path}: the folder {path.parent} does not exist; create it or choose another path")
-    try:
-        atomic_write_text(path, text)
-    except StorageError as exc:
-        raise UserError(f"{option} {exc}") from None
+    write_output_text(path, text, option)
 
 
 def cmd_plugins(as_json: Annotated[bool, typer.Option("--json", help="machine-readable output")] = False) -> None:

@@ -36,3 +36,48 @@ def test_eval_on_a_motion_source_that_needs_params_says_to_write_a_spec(amp_poli
 )
 def test_eval_counts_out_of_range_are_one_line(amp_policy, args, fragment):
     assert_one_line_error(invoke(["eval", amp_policy, *args]), fragment)
+
+
+# ------------------------------------------------------------------ output paths, checked before any work
+def test_generate_refuses_an_unsupported_video_file_at_once(amp_policy, tmp_path):
+    """Checked before the target loads (a policy file is no latent space: that error would come next)."""
+    assert_one_line_error(invoke(["generate", amp_policy, "--video", tmp_path / "gen.mkv"]), "--video", "the video must be a .mp4 or .gif file")
+    assert_one_line_error(invoke(["recover", amp_policy, "--video", tmp_path / "r.avi"]), "--video", "the video must be a .mp4 or .gif file")
+
+
+def test_render_refuses_a_folder_that_does_not_exist_instead_of_creating_it(tmp_path):
+    missing = tmp_path / "nonexistent"
+    line = assert_one_line_error(invoke(["render", "--motion", "walk", "--out", missing / "walk.mp4"]), "--out")
+    assert f"the folder {missing} does not exist" in line
+    assert not missing.exists()
+
+
+@pytest.mark.parametrize("where", ["folder", "under_a_file", "under_a_file_deeper", "long_name"])
+def test_eval_output_paths_are_refused_before_any_evaluation(amp_policy, tmp_path, monkeypatch, where):
+    import mocap.imitation_eval
+
+    def never(*args, **kwargs):
+        raise AssertionError("the evaluation ran before the output path was checked")
+
+    monkeypatch.setattr(mocap.imitation_eval, "evaluate_imitator", never)
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    json_path = {
+        "folder": tmp_path,
+        "under_a_file": afile / "x.json",
+        "under_a_file_deeper": afile / "sub" / "x.json",
+        "long_name": tmp_path / ("n" * 5000 + ".json"),
+    }[where]
+    result = invoke(["eval", amp_policy, "--json", json_path])
+    line = assert_one_line_error(result, "--json")
+    assert {"folder": "a directory; give a file name", "long_name": "longer than 255 bytes"}.get(where, f"{afile} is a file, not a folder") in line
+    assert len(line) < 400
+    assert_one_line_error(invoke(["eval", amp_policy, "--video", afile / "v"]), "--video", "a file, not a directory")
+    for command in (["eval-noisy", amp_policy], ["recover", amp_policy]):
+        assert_one_line_error(invoke([*command, "--json", json_path]), "--json")
+
+
+def test_task_eval_json_under_a_file_is_refused_before_loading(tmp_path):
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    assert_one_line_error(invoke(["task-eval", tmp_path / "no_run", "--json", afile / "x.json"]), "--json", "is a file, not a folder")
