@@ -23,6 +23,7 @@ import os
 import platform
 import re
 import tempfile
+import warnings
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -152,9 +153,19 @@ def load_checkpoint(
     if not path.is_file():
         raise CheckpointError(f"{path}: no such checkpoint")
     try:
-        data = torch.load(path, map_location=map_location, weights_only=True)
+        with warnings.catch_warnings():  # torch's "Detected pickle protocol 4" is no news to the user
+            warnings.simplefilter("ignore", UserWarning)
+            data = torch.load(path, map_location=map_location, weights_only=True)
     except Exception as exc:  # noqa: BLE001 - torch raises EOFError, RuntimeError, UnpicklingError, ...
-        unsafe = _refused_global(exc)
+        from mocap.pickle_scan import convertible, refused_global
+
+        named = refused_global(path)  # read from the pickle's opcodes: torch does not always name it
+        if named is not None and not convertible(named):
+            raise CheckpointError(
+                f"{path}: refused: the checkpoint names the global {named}, which mocap does not load (a mocap checkpoint "
+                "holds only tensors and plain data; loading this one would run code from it)"
+            ) from None
+        unsafe = named or _refused_global(exc)
         if unsafe is not None:
             raise CheckpointError(
                 f"{path}: refused: the file holds pickled Python objects ({unsafe}) that loading would have to run; mocap "

@@ -4,7 +4,9 @@ refused with one ``error:`` line, and older checkpoints convert once with an exp
 
 from __future__ import annotations
 
+import os
 import random
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -45,9 +47,38 @@ def test_the_payload_would_run_on_an_unrestricted_load(tmp_path):
 
 def test_load_checkpoint_refuses_a_pickle_payload(tmp_path):
     path, marker = _evil(tmp_path)
-    with pytest.raises(CheckpointError, match="refused.*pickled Python objects.*mocap checkpoint convert"):
+    with pytest.raises(CheckpointError, match=r"refused: the checkpoint names the global \w+\.exec, which mocap does not load") as err:
         load_checkpoint(path)
+    assert "convert" not in str(err.value)  # converting would run it: no such advice
     assert not marker.exists()
+
+
+class _Call:
+    """Unpickling this object calls ``func(*args)``."""
+
+    def __init__(self, func, *args):
+        self.func, self.args = func, args
+
+    def __reduce__(self):  # noqa: D105
+        return (self.func, self.args)
+
+
+@pytest.mark.parametrize("protocol", [2, 4, 5])
+@pytest.mark.parametrize("func, named", [(print, "print"), (os.system, "system")], ids=["print", "os.system"])
+def test_a_refused_global_is_named_not_called_corrupt_and_no_torch_warning_shows(tmp_path, capsys, protocol, func, named):
+    """Issue 63, newcomer 8 / fuzz 6: a pickle of protocol 4 or 5 fails in torch's restricted
+    unpickler before it names the global (``Unsupported operand 149``) and warns about the protocol;
+    the user gets "refused" naming the global, and no warning."""
+    path = tmp_path / "policy.pt"
+    torch.save({"format": "mocap.rl.policy/1", "x": _Call(func, "echo hi")}, path, pickle_protocol=protocol)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(CheckpointError, match=rf"refused: the checkpoint names the global \w+\.{named}, which mocap does not load") as err:
+            load_checkpoint(path)
+    assert "corrupt" not in str(err.value)
+    assert main(["eval", str(path)]) == 2
+    stderr = capsys.readouterr().err
+    assert "refused: the checkpoint names the global" in stderr and "Warning" not in stderr
 
 
 @pytest.mark.parametrize(
