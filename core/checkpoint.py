@@ -216,10 +216,21 @@ def _to_safe(obj: Any) -> Any:
     return obj
 
 
+def loads_safely(path: Path) -> bool:
+    """Whether :func:`load_checkpoint` reads ``path`` (a restricted load, no code run): such a file
+    needs no conversion."""
+    try:
+        load_checkpoint(path)
+    except CheckpointError:
+        return False
+    return True
+
+
 def convert_checkpoint(src: Path, dst: Path | None = None) -> Path:
     """Rewrite an older checkpoint that a safe load refuses into the safe form (``dst``, default in
     place). **This unpickles ``src`` without restriction, i.e. runs whatever code it holds: call it
-    only on a file you trust.** Raises :class:`CheckpointError` when the result still is not safe
+    only on a file you trust.** A file that already loads safely is left as it is (copied unchanged
+    to a ``dst`` elsewhere). Raises :class:`CheckpointError` when the result still is not safe
     (an object this converter does not know) or the file is not a checkpoint."""
     import io
 
@@ -227,6 +238,10 @@ def convert_checkpoint(src: Path, dst: Path | None = None) -> Path:
     dst = Path(dst) if dst is not None else src
     if not src.is_file():
         raise CheckpointError(f"{src}: no such checkpoint")
+    if loads_safely(src):  # nothing to convert: the file stays byte for byte as it is
+        if dst.resolve() != src.resolve():
+            atomic_write_bytes(dst, src.read_bytes())
+        return dst
     try:
         data = torch.load(src, map_location="cpu", weights_only=False)
     except Exception as exc:  # noqa: BLE001
@@ -339,6 +354,7 @@ __all__ = [
     "embedded_humanoid_section",
     "hardware",
     "load_checkpoint",
+    "loads_safely",
     "package_versions",
     "save_checkpoint",
     "split_format",

@@ -27,7 +27,7 @@ EXIT_INTERRUPTED = 130
 
 
 from mocap.errors import UserError, user_errors  # noqa: E402  (re-exported: mocap.cli.UserError)
-from mocap.paths import check_output_dir  # noqa: E402  (re-exported)
+from mocap.paths import check_output_dir, check_output_file  # noqa: E402  (re-exported)
 
 
 #: third-party modules -> the pip package that provides them (for the "not installed" message)
@@ -261,8 +261,16 @@ def cmd_checkpoint_convert(
 
     Converting unpickles the file without restriction, i.e. runs any code it holds: only for files
     you trust (yours, or an official release). Needs --trust."""
-    from mocap.checkpoint import convert_checkpoint
+    from mocap.checkpoint import atomic_write_bytes, convert_checkpoint, loads_safely
 
+    if path.is_file() and loads_safely(path):  # before --trust: nothing would be unpickled
+        copied = ""
+        if out is not None and out.resolve() != path.resolve():
+            check_output_file(out, "--out")
+            atomic_write_bytes(out, path.read_bytes())
+            copied = f"; copied unchanged to {out}"
+        console.print(f"{path} already loads without running code: nothing to convert, the file is left as it is{copied}", highlight=False)
+        return
     if not trust:
         raise UserError(f"{path}: converting a checkpoint runs any code pickled in it; only convert files you trust, and say so with --trust")
     err_console.print(f"[yellow]warning:[/] unpickling {path} without restriction (trusted by --trust)", highlight=False)

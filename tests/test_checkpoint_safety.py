@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import torch
 
-from mocap.checkpoint import CheckpointError, convert_checkpoint, load_checkpoint
+from mocap.checkpoint import CheckpointError, convert_checkpoint, load_checkpoint, save_checkpoint
 from mocap.cli import main
 from mocap.rng import rng_state, set_rng_state
 
@@ -79,6 +79,19 @@ def test_a_refused_global_is_named_not_called_corrupt_and_no_torch_warning_shows
     assert main(["eval", str(path)]) == 2
     stderr = capsys.readouterr().err
     assert "refused: the checkpoint names the global" in stderr and "Warning" not in stderr
+
+
+def test_converting_an_already_safe_checkpoint_leaves_it_byte_identical(tmp_path, capsys):
+    """Issue 63, newcomer 6: ``convert --trust`` of a file that already loads safely says so."""
+    path = tmp_path / "policy.pt"
+    save_checkpoint(path, {"format": "x/1", "w": torch.arange(3.0)})
+    before = path.read_bytes()
+    assert main(["checkpoint", "convert", str(path), "--trust"]) == 0
+    assert "already loads without running code" in capsys.readouterr().out
+    assert path.read_bytes() == before
+    assert convert_checkpoint(path) == path and path.read_bytes() == before
+    assert main(["checkpoint", "convert", str(path), "--out", str(tmp_path / "copy.pt")]) == 0
+    assert (tmp_path / "copy.pt").read_bytes() == before
 
 
 @pytest.mark.parametrize(
