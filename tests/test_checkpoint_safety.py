@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from committed import committed_files
 
 from mocap.checkpoint import CheckpointError, convert_checkpoint, load_checkpoint, save_checkpoint
 from mocap.cli import main
@@ -167,7 +168,7 @@ def test_convert_refuses_what_it_cannot_make_safe(tmp_path):
 
 
 def test_every_committed_checkpoint_loads_safely():
-    files = sorted(REPO.glob("checkpoints/*/*.pt"))
+    files = committed_files("checkpoints", "*/*.pt")
     assert files
     for f in files:
         assert isinstance(load_checkpoint(f), dict)
@@ -182,8 +183,8 @@ def test_committed_checkpoints_name_their_dependencies_by_relative_path():
     from mocap.plugins import get_plugins
 
     inside = (REPO / "checkpoints").resolve()
-    specs = [(f, load_checkpoint(f).get("spec") or "{}") for f in sorted(REPO.glob("checkpoints/*/*.pt"))]
-    specs += [(f, f.read_text()) for f in sorted(REPO.glob("checkpoints/*/spec.yaml"))]
+    specs = [(f, load_checkpoint(f).get("spec") or "{}") for f in committed_files("checkpoints", "*/*.pt")]
+    specs += [(f, f.read_text()) for f in committed_files("checkpoints", "*/spec.yaml")]
     for f, text in specs:
         doc = yaml.safe_load(text) or {}
         for stage in ("imitator", "latent", "task"):

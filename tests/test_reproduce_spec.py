@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 import torch
+from committed import committed_files
 
 from mocap.matrix import load_cells
 from mocap.pipeline import stage_keys
@@ -39,7 +40,7 @@ def test_reproduce_spec_trains_everything_and_shares_the_imitator():
     plugins = get_plugins()
     cells = {cell.name: resolved for cell, resolved in load_cells(SPEC, plugins)}
     assert set(cells) == {"latent-none", "latent-pulse", "latent-hybrid_rvq", "latent-vmp"}
-    committed = {p.parent.name for p in (ROOT / "checkpoints").glob("*/*.pt")}
+    committed = {p.parent.name for p in committed_files("checkpoints", "*/*.pt")}  # tracked by git: not a user's export
     latents = {f"{r.spec.latent.name}_amp" for r in cells.values() if r.spec.latent is not None}
     # imitator _v2 and _v3: the same recipe trained further; vmp_amp: an earlier recipe, superseded by vmp_amp_v2;
     # vmp_amp_m: the M-conditioning ablation of the vmp cell; pulse_amp_v2: the pulse recipe with the
@@ -384,3 +385,19 @@ def test_the_v15_task_specs_compare_the_latents_at_equal_ppo_budgets(task):
     assert {latent: s.task.name for latent, s in specs.items()} == dict.fromkeys(specs, task)
     hp = {latent: (s.humanoid.name, s.humanoid.params) for latent, s in specs.items()}
     assert len({(n, tuple(sorted(p.items()))) for n, p in hp.values()}) == 1, hp
+
+
+def test_a_users_export_into_checkpoints_is_no_committed_checkpoint(tmp_path):
+    """Issue 63, newcomer 7: the README's ``mocap export runs/pulse-amp-v20 checkpoints/my_pulse``
+    writes an untracked folder; the committed-checkpoint tests count only what git tracks."""
+    import subprocess
+
+    for name in ("imitator", "my_pulse"):
+        (tmp_path / "checkpoints" / name).mkdir(parents=True)
+        (tmp_path / "checkpoints" / name / "policy.pt").write_bytes(b"x")
+    git = ["git", "-C", str(tmp_path), "-c", "user.name=t", "-c", "user.email=t@t"]
+    subprocess.run([*git, "init", "-q"], check=True)
+    subprocess.run([*git, "add", "checkpoints/imitator"], check=True)
+    subprocess.run([*git, "commit", "-qm", "one checkpoint"], check=True)
+    assert committed_files("checkpoints", "*/*.pt", root=tmp_path) == [tmp_path / "checkpoints" / "imitator" / "policy.pt"]
+    assert {p.parent.name for p in committed_files("checkpoints", "*/*.pt")} >= {"imitator", "pulse"}  # this repository's
