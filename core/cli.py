@@ -184,7 +184,13 @@ def cmd_run(
 
     for line in headline(records):
         console.print(f"  {line}", highlight=False)
-    if resolved.spec.imitator is not None:
+    if resolved.spec.task is not None:  # a task policy: its own evaluation, not the imitation protocol
+        console.print(
+            f"next: `mocap task-eval {out_dir}` evaluates the task policy (task error in units, falls); "
+            f"`mocap render {out_dir} --out task.mp4` shows it; more specs to run are in specs/",
+            highlight=False,
+        )
+    elif resolved.spec.imitator is not None:
         console.print(f"next: `mocap eval {out_dir}` prints the per-clip imitation table; more specs to run are in specs/", highlight=False)
 
 
@@ -301,6 +307,7 @@ def build_app(pset: PluginSet | None = None) -> typer.Typer:
         no_args_is_help=True,
         pretty_exceptions_show_locals=False,
         add_completion=False,
+        context_settings={"help_option_names": ["-h", "--help"]},  # every subcommand inherits it
     )
     app.command("run")(cmd_run)
     app.command("validate")(cmd_validate)

@@ -81,3 +81,49 @@ def test_task_eval_json_under_a_file_is_refused_before_loading(tmp_path):
     afile = tmp_path / "afile"
     afile.write_text("x")
     assert_one_line_error(invoke(["task-eval", tmp_path / "no_run", "--json", afile / "x.json"]), "--json", "is a file, not a folder")
+
+
+# ------------------------------------------------------------------ the small newcomer items (10)
+@pytest.mark.parametrize("argv", [["-h"], ["eval", "-h"], ["checkpoint", "convert", "-h"], ["motions", "list", "-h"]])
+def test_dash_h_is_help(argv):
+    result = invoke(argv)
+    assert result.exit_code == 0, result.output
+    assert "Usage" in result.output and "--help" in result.output
+
+
+def test_after_a_task_run_the_next_hint_names_task_eval(tmp_path, monkeypatch):
+    import mocap.pipeline
+
+    monkeypatch.setattr(mocap.pipeline, "run_pipeline", lambda *args, **kwargs: [])  # the run itself is not the point
+    spec = Path(__file__).resolve().parents[1] / "specs" / "tasks" / "speed_pulse_v20.yaml"
+    result = invoke(["run", spec, "--out", tmp_path / "speed"])
+    assert result.exit_code == 0, result.output
+    assert f"next: `mocap task-eval {tmp_path / 'speed'}`" in result.stdout
+    assert "mocap eval " not in result.stdout
+
+
+def test_comparison_shows_success_as_a_count_and_an_unmeasured_time_to_fall_as_a_dash():
+    from mocap.matrix import render
+
+    def one(mean: float) -> dict:
+        return {"mean": mean, "std": None, "ci95": None, "n": 1}
+
+    text = render(
+        {
+            "latent=pulse": {
+                "eval/imitation/success_rate": one(14 / 15),
+                "eval/imitation/succeeded": one(14.0),
+                "eval/imitation/total": one(15.0),
+                "eval/generation/time_to_fall_s": one(float("nan")),
+            },
+            "latent=vmp": {
+                "eval/imitation/success_rate": {"mean": 0.6, "std": 0.1, "ci95": 0.2, "n": 3},
+                "eval/imitation/succeeded": {"mean": 9.0, "std": 1.0, "ci95": 2.48, "n": 3},
+                "eval/imitation/total": {"mean": 15.0, "std": 0.0, "ci95": 0.0, "n": 3},
+                "eval/generation/time_to_fall_s": one(3.5),
+            },
+        }
+    )
+    assert "| latent=pulse | 14/15 | - |" in text, text
+    assert "| latent=vmp | 9/15 ± 2.5 (n=3) | 3.5 |" in text, text
+    assert "0.933" not in text and "nan" not in text
