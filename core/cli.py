@@ -48,8 +48,19 @@ def missing_package_message(exc: ImportError) -> str | None:
     return f"the Python package {package!r} is missing or broken (importing {name!r} failed{extra}); install it into this environment: pip install {package}"
 
 
+#: longest error line printed (a 10 MB string from a checkpoint must not reach the terminal whole)
+MAX_ERROR_CHARS = 2000
+
+
+def capped(message: str, limit: int = MAX_ERROR_CHARS) -> str:
+    """``message`` cut to ``limit`` characters, saying how much was left out."""
+    if len(message) <= limit:
+        return message
+    return f"{message[:limit]} ... [{len(message) - limit:,} more characters]"
+
+
 def fail(message: str, code: int = EXIT_USER_ERROR) -> "typer.Exit":
-    err_console.print(f"[red]error:[/] {message}", highlight=False)
+    err_console.print(f"[red]error:[/] {capped(message)}", highlight=False)
     return typer.Exit(code)
 
 
@@ -342,7 +353,7 @@ def main(argv: list[str] | None = None) -> int:
         return int(exc.exit_code or 0)
     except user_errors() as exc:
         message = exc.format() if hasattr(exc, "format") and callable(exc.format) else str(exc)
-        err_console.print(f"[red]error:[/] {message}", highlight=False)
+        err_console.print(f"[red]error:[/] {capped(message)}", highlight=False)
         return EXIT_USER_ERROR
     except KeyboardInterrupt:
         err_console.print("[yellow]interrupted[/]")

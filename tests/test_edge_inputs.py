@@ -127,3 +127,40 @@ def test_comparison_shows_success_as_a_count_and_an_unmeasured_time_to_fall_as_a
     assert "| latent=pulse | 14/15 | - |" in text, text
     assert "| latent=vmp | 9/15 ± 2.5 (n=3) | 3.5 |" in text, text
     assert "0.933" not in text and "nan" not in text
+
+
+# ------------------------------------------------------------------ spec bounds, error-line length (fuzz 1, 3, 4)
+AMP_BUNDLED = Path(__file__).resolve().parents[1] / "specs" / "imitator" / "amp_bundled.yaml"
+
+
+@pytest.mark.parametrize(
+    "override, fragment",
+    [
+        ("imitator.trainer.params.epochs=1000000000", "imitator.trainer.params.epochs: Input should be less than or equal to 1000"),
+        ("imitator.trainer.params.horizon=1000000000", "imitator.trainer.params.horizon: Input should be less than or equal to 100000"),
+        ("imitator.trainer.params.num_envs=100000000", "imitator.trainer.params.num_envs: Input should be less than or equal to"),
+        ("imitator.trainer.params.minibatch_size=100000000000", "imitator.trainer.params.minibatch_size: Input should be less than or equal to"),
+        ("imitator.trainer.params.total_env_steps=10000000000000", "imitator.trainer.params.total_env_steps: Input should be less than or equal to"),
+        ("imitator.trainer.params.horizon=100000", "the batch num_envs × horizon = 12,800,000 samples exceeds 10,000,000"),
+        ("seed=" + "1" * 30, "seed: Input should be less than or equal to"),
+    ],
+)
+def test_counts_a_spec_sets_for_ppo_are_bounded(override, fragment):
+    assert_one_line_error(invoke(["validate", AMP_BUNDLED, "--set", override]), fragment)
+
+
+def test_a_seed_of_4301_digits_is_one_error_line(tmp_path):
+    spec = tmp_path / "seed.yaml"
+    spec.write_text(f"spec_version: 1\nextends: {AMP_BUNDLED}\nseed: {'1' * 4301}\n")
+    line = assert_one_line_error(invoke(["validate", spec]), str(spec), "a number of more than 4,300 digits")
+    assert len(line) < 300
+    assert_one_line_error(invoke(["validate", AMP_BUNDLED, "--set", "seed=" + "1" * 4301]), "seed")
+
+
+def test_error_lines_are_capped(tmp_path):
+    import torch
+
+    path = tmp_path / "policy.pt"  # a newer format written by a "mocap" whose version string is 1 MB
+    torch.save({"format": "mocap.rl.policy/2", "versions": {"mocap": "9" * 1_000_000}}, path)
+    line = assert_one_line_error(invoke(["eval", path]), str(path), "format version 2")
+    assert len(line) <= 2100 and line.endswith("more characters]"), line[-80:]  # mocap.cli.MAX_ERROR_CHARS: 2000
