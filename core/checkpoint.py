@@ -19,6 +19,7 @@ read-only folder); the CLI prints either as one ``error:`` line with exit code 2
 from __future__ import annotations
 
 import json
+import math
 import os
 import platform
 import re
@@ -313,10 +314,10 @@ def training_status(data: dict[str, Any]) -> str | None:
     params = data.get("params") if isinstance(data.get("params"), dict) else {}
     done = data.get("env_steps")
     total = params.get("total_env_steps") if isinstance(params, dict) else None
-    if isinstance(done, (int, float)) and isinstance(total, (int, float)) and total > 0:
+    if isinstance(done, (int, float)) and isinstance(total, (int, float)) and math.isfinite(done) and math.isfinite(total) and total > 0:
         return f"in progress: {int(done):,} of {int(total):,} env steps ({100.0 * done / total:.1f}%)"
     step = data.get("iteration", data.get("step"))
-    return f"in progress (saved at step {int(step):,})" if isinstance(step, (int, float)) else "in progress"
+    return f"in progress (saved at step {int(step):,})" if isinstance(step, (int, float)) and math.isfinite(step) else "in progress"
 
 
 def embedded_humanoid_section(data: dict[str, Any]) -> Any:

@@ -164,3 +164,66 @@ def test_error_lines_are_capped(tmp_path):
     torch.save({"format": "mocap.rl.policy/2", "versions": {"mocap": "9" * 1_000_000}}, path)
     line = assert_one_line_error(invoke(["eval", path]), str(path), "format version 2")
     assert len(line) <= 2100 and line.endswith("more characters]"), line[-80:]  # mocap.cli.MAX_ERROR_CHARS: 2000
+
+
+# ------------------------------------------------------------------ a policy file's config, checked before any network is built (fuzz 1)
+def _edit(data: dict, case: str) -> dict:
+    config = dict(data["config"])
+    edits = {
+        "activation": {"activation": "nosuch"},
+        "obs_dim_text": {"obs_dim": "abc"},
+        "obs_dim_inf": {"obs_dim": float("inf")},
+        "obs_dim_huge": {"obs_dim": 300_000_000},
+        "hidden_text": {"actor_hidden": "abc"},
+        "hidden_huge": {"actor_hidden": [583, 1_300_000]},
+        "log_std_text": {"log_std_init": "x"},
+        "obs_clip_text": {"obs_clip": "x"},
+        "space_type": {"action_space": {"type": "weird"}},
+    }
+    if case in edits:
+        return {**data, "config": {**config, **edits[case]}}
+    if case == "config_text":
+        return {**data, "config": "hello"}
+    if case == "no_state_dict":
+        return {k: v for k, v in data.items() if k != "state_dict"}
+    assert case == "int_keys"
+    return {**data, "state_dict": dict(enumerate(data["state_dict"].values()))}
+
+
+@pytest.mark.parametrize(
+    "case, fragment",
+    [
+        ("activation", "config.activation"),
+        ("obs_dim_text", "config.obs_dim"),
+        ("obs_dim_inf", "config.obs_dim"),
+        ("obs_dim_huge", "config.obs_dim: Input should be less than or equal to 100000"),
+        ("hidden_text", "config.actor_hidden"),
+        ("hidden_huge", "config.actor_hidden.1: Input should be less than or equal to 100000"),
+        ("log_std_text", "config.log_std_init"),
+        ("obs_clip_text", "config.obs_clip"),
+        ("space_type", "config.action_space"),
+        ("config_text", "the policy's config is a str"),
+        ("no_state_dict", "state_dict"),
+        ("int_keys", "not a named tensor"),
+    ],
+)
+def test_a_policy_file_with_a_bad_config_or_weights_is_one_error_line(amp_policy, tmp_path, monkeypatch, case, fragment):
+    import torch
+
+    import mocap.rl.networks
+
+    def never(*args, **kwargs):
+        raise AssertionError("the network was built before its config was checked")
+
+    path = tmp_path / "policy.pt"
+    torch.save(_edit(torch.load(amp_policy, weights_only=True), case), path)
+    if case not in ("no_state_dict", "int_keys"):
+        monkeypatch.setattr(mocap.rl.networks.ActorCritic, "from_config", never)
+    assert_one_line_error(invoke(["eval", path]), str(path), fragment)
+
+
+def test_an_unfinished_checkpoint_with_nan_env_steps_is_still_described():
+    from mocap.checkpoint import training_status
+
+    assert training_status({"finished": False, "env_steps": float("nan"), "params": {"total_env_steps": 100}}) == "in progress"
+    assert training_status({"finished": False, "step": float("inf")}) == "in progress"
