@@ -18,6 +18,15 @@ MAX_THREADS = max(8, 4 * (os.cpu_count() or 1))
 MAX_ENVS = 65536
 #: widest hidden layer
 MAX_WIDTH = 65536
+#: most passes over one batch (PPO's ``epochs``)
+MAX_EPOCHS = 1000
+#: most steps per env per iteration (PPO's ``horizon``)
+MAX_HORIZON = 100_000
+#: most samples in one batch (``num_envs`` x ``horizon``; PHC's GPU recipe: 49,152): the rollout
+#: buffers are allocated whole
+MAX_BATCH = 10_000_000
+#: the largest training budget, env steps (a trillion: years on any machine)
+MAX_ENV_STEPS = 10**12
 #: the hidden activations of :data:`mocap.rl.networks.ACTIVATIONS` (its keys), for params that name one
 ACTIVATION_NAMES: tuple[str, ...] = ("elu", "relu", "tanh", "silu", "gelu")
 
@@ -26,5 +35,23 @@ EnvCount = Annotated[int, Field(ge=1, le=MAX_ENVS)]
 LayerWidth = Annotated[int, Field(ge=1, le=MAX_WIDTH)]
 LearningRate = Annotated[float, Field(gt=0.0, le=1.0, allow_inf_nan=False)]
 LogStd = Annotated[float, Field(ge=-20.0, le=5.0, allow_inf_nan=False)]
+EpochCount = Annotated[int, Field(ge=1, le=MAX_EPOCHS)]
+EnvSteps = Annotated[int, Field(ge=1, le=MAX_ENV_STEPS)]
 
-__all__ = ["ACTIVATION_NAMES", "MAX_ENVS", "MAX_THREADS", "MAX_WIDTH", "EnvCount", "LayerWidth", "LearningRate", "LogStd", "ThreadCount"]
+__all__ = [
+    "ACTIVATION_NAMES",
+    "MAX_BATCH",
+    "MAX_ENVS",
+    "MAX_ENV_STEPS",
+    "MAX_EPOCHS",
+    "MAX_HORIZON",
+    "MAX_THREADS",
+    "MAX_WIDTH",
+    "EnvCount",
+    "EnvSteps",
+    "EpochCount",
+    "LayerWidth",
+    "LearningRate",
+    "LogStd",
+    "ThreadCount",
+]

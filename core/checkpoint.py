@@ -19,10 +19,12 @@ read-only folder); the CLI prints either as one ``error:`` line with exit code 2
 from __future__ import annotations
 
 import json
+import math
 import os
 import platform
 import re
 import tempfile
+import warnings
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -152,9 +154,19 @@ def load_checkpoint(
     if not path.is_file():
         raise CheckpointError(f"{path}: no such checkpoint")
     try:
-        data = torch.load(path, map_location=map_location, weights_only=True)
+        with warnings.catch_warnings():  # torch's "Detected pickle protocol 4" is no news to the user
+            warnings.simplefilter("ignore", UserWarning)
+            data = torch.load(path, map_location=map_location, weights_only=True)
     except Exception as exc:  # noqa: BLE001 - torch raises EOFError, RuntimeError, UnpicklingError, ...
-        unsafe = _refused_global(exc)
+        from mocap.pickle_scan import convertible, refused_global
+
+        named = refused_global(path)  # read from the pickle's opcodes: torch does not always name it
+        if named is not None and not convertible(named):
+            raise CheckpointError(
+                f"{path}: refused: the checkpoint names the global {named}, which mocap does not load (a mocap checkpoint "
+                "holds only tensors and plain data; loading this one would run code from it)"
+            ) from None
+        unsafe = named or _refused_global(exc)
         if unsafe is not None:
             raise CheckpointError(
                 f"{path}: refused: the file holds pickled Python objects ({unsafe}) that loading would have to run; mocap "
@@ -205,10 +217,21 @@ def _to_safe(obj: Any) -> Any:
     return obj
 
 
+def loads_safely(path: Path) -> bool:
+    """Whether :func:`load_checkpoint` reads ``path`` (a restricted load, no code run): such a file
+    needs no conversion."""
+    try:
+        load_checkpoint(path)
+    except CheckpointError:
+        return False
+    return True
+
+
 def convert_checkpoint(src: Path, dst: Path | None = None) -> Path:
     """Rewrite an older checkpoint that a safe load refuses into the safe form (``dst``, default in
     place). **This unpickles ``src`` without restriction, i.e. runs whatever code it holds: call it
-    only on a file you trust.** Raises :class:`CheckpointError` when the result still is not safe
+    only on a file you trust.** A file that already loads safely is left as it is (copied unchanged
+    to a ``dst`` elsewhere). Raises :class:`CheckpointError` when the result still is not safe
     (an object this converter does not know) or the file is not a checkpoint."""
     import io
 
@@ -216,6 +239,10 @@ def convert_checkpoint(src: Path, dst: Path | None = None) -> Path:
     dst = Path(dst) if dst is not None else src
     if not src.is_file():
         raise CheckpointError(f"{src}: no such checkpoint")
+    if loads_safely(src):  # nothing to convert: the file stays byte for byte as it is
+        if dst.resolve() != src.resolve():
+            atomic_write_bytes(dst, src.read_bytes())
+        return dst
     try:
         data = torch.load(src, map_location="cpu", weights_only=False)
     except Exception as exc:  # noqa: BLE001
@@ -287,10 +314,10 @@ def training_status(data: dict[str, Any]) -> str | None:
     params = data.get("params") if isinstance(data.get("params"), dict) else {}
     done = data.get("env_steps")
     total = params.get("total_env_steps") if isinstance(params, dict) else None
-    if isinstance(done, (int, float)) and isinstance(total, (int, float)) and total > 0:
+    if isinstance(done, (int, float)) and isinstance(total, (int, float)) and math.isfinite(done) and math.isfinite(total) and total > 0:
         return f"in progress: {int(done):,} of {int(total):,} env steps ({100.0 * done / total:.1f}%)"
     step = data.get("iteration", data.get("step"))
-    return f"in progress (saved at step {int(step):,})" if isinstance(step, (int, float)) else "in progress"
+    return f"in progress (saved at step {int(step):,})" if isinstance(step, (int, float)) and math.isfinite(step) else "in progress"
 
 
 def embedded_humanoid_section(data: dict[str, Any]) -> Any:
@@ -328,6 +355,7 @@ __all__ = [
     "embedded_humanoid_section",
     "hardware",
     "load_checkpoint",
+    "loads_safely",
     "package_versions",
     "save_checkpoint",
     "split_format",

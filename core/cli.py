@@ -27,7 +27,7 @@ EXIT_INTERRUPTED = 130
 
 
 from mocap.errors import UserError, user_errors  # noqa: E402  (re-exported: mocap.cli.UserError)
-from mocap.paths import check_output_dir  # noqa: E402  (re-exported)
+from mocap.paths import check_output_dir, check_output_file  # noqa: E402  (re-exported)
 
 
 #: third-party modules -> the pip package that provides them (for the "not installed" message)
@@ -48,8 +48,19 @@ def missing_package_message(exc: ImportError) -> str | None:
     return f"the Python package {package!r} is missing or broken (importing {name!r} failed{extra}); install it into this environment: pip install {package}"
 
 
+#: longest error line printed (a 10 MB string from a checkpoint must not reach the terminal whole)
+MAX_ERROR_CHARS = 2000
+
+
+def capped(message: str, limit: int = MAX_ERROR_CHARS) -> str:
+    """``message`` cut to ``limit`` characters, saying how much was left out."""
+    if len(message) <= limit:
+        return message
+    return f"{message[:limit]} ... [{len(message) - limit:,} more characters]"
+
+
 def fail(message: str, code: int = EXIT_USER_ERROR) -> "typer.Exit":
-    err_console.print(f"[red]error:[/] {message}", highlight=False)
+    err_console.print(f"[red]error:[/] {capped(message)}", highlight=False)
     return typer.Exit(code)
 
 
@@ -184,7 +195,13 @@ def cmd_run(
 
     for line in headline(records):
         console.print(f"  {line}", highlight=False)
-    if resolved.spec.imitator is not None:
+    if resolved.spec.task is not None:  # a task policy: its own evaluation, not the imitation protocol
+        console.print(
+            f"next: `mocap task-eval {out_dir}` evaluates the task policy (task error in units, falls); "
+            f"`mocap render {out_dir} --out task.mp4` shows it; more specs to run are in specs/",
+            highlight=False,
+        )
+    elif resolved.spec.imitator is not None:
         console.print(f"next: `mocap eval {out_dir}` prints the per-clip imitation table; more specs to run are in specs/", highlight=False)
 
 
@@ -203,19 +220,11 @@ def cmd_schema(
 
 
 def write_user_file(path: Path, text: str, option: str) -> None:
-    """Write ``text`` to a file the user named; a path that cannot be written (a missing folder, a
-    directory, no permission, a full disk) is a :class:`UserError` naming it, not a traceback."""
-    from mocap.checkpoint import StorageError, atomic_write_text
+    """Write ``text`` to a file the user named: :func:`mocap.paths.write_output_text` (a path that
+    cannot be written is a :class:`UserError` naming it, not a traceback)."""
+    from mocap.paths import write_output_text
 
-    path = Path(path)
-    if path.is_dir():
-        raise UserError(f"{option} {path}: a directory; give a file name (e.g. {path / 'mocap.schema.json'})")
-    if not path.parent.is_dir():
-        raise UserError(f"{option} {path}: the folder {path.parent} does not exist; create it or choose another path")
-    try:
-        atomic_write_text(path, text)
-    except StorageError as exc:
-        raise UserError(f"{option} {exc}") from None
+    write_output_text(path, text, option)
 
 
 def cmd_plugins(as_json: Annotated[bool, typer.Option("--json", help="machine-readable output")] = False) -> None:
@@ -269,8 +278,16 @@ def cmd_checkpoint_convert(
 
     Converting unpickles the file without restriction, i.e. runs any code it holds: only for files
     you trust (yours, or an official release). Needs --trust."""
-    from mocap.checkpoint import convert_checkpoint
+    from mocap.checkpoint import atomic_write_bytes, convert_checkpoint, loads_safely
 
+    if path.is_file() and loads_safely(path):  # before --trust: nothing would be unpickled
+        copied = ""
+        if out is not None and out.resolve() != path.resolve():
+            check_output_file(out, "--out")
+            atomic_write_bytes(out, path.read_bytes())
+            copied = f"; copied unchanged to {out}"
+        console.print(f"{path} already loads without running code: nothing to convert, the file is left as it is{copied}", highlight=False)
+        return
     if not trust:
         raise UserError(f"{path}: converting a checkpoint runs any code pickled in it; only convert files you trust, and say so with --trust")
     err_console.print(f"[yellow]warning:[/] unpickling {path} without restriction (trusted by --trust)", highlight=False)
@@ -301,6 +318,7 @@ def build_app(pset: PluginSet | None = None) -> typer.Typer:
         no_args_is_help=True,
         pretty_exceptions_show_locals=False,
         add_completion=False,
+        context_settings={"help_option_names": ["-h", "--help"]},  # every subcommand inherits it
     )
     app.command("run")(cmd_run)
     app.command("validate")(cmd_validate)
@@ -335,7 +353,7 @@ def main(argv: list[str] | None = None) -> int:
         return int(exc.exit_code or 0)
     except user_errors() as exc:
         message = exc.format() if hasattr(exc, "format") and callable(exc.format) else str(exc)
-        err_console.print(f"[red]error:[/] {message}", highlight=False)
+        err_console.print(f"[red]error:[/] {capped(message)}", highlight=False)
         return EXIT_USER_ERROR
     except KeyboardInterrupt:
         err_console.print("[yellow]interrupted[/]")

@@ -273,6 +273,28 @@ def _is_distilled(path: Path) -> bool:
     return load_checkpoint(path).get("format") in (LATENT_FORMAT, CHECKPOINT_FORMAT)
 
 
+def motion_source_by_name(plugins: Any, name: str, option: str = "--motions") -> Any:
+    """The motion source ``name`` with its default params (``--motions NAME``), or a
+    :class:`~mocap.errors.UserError` when it cannot be built without params (e.g. ``amass`` and
+    ``npz``, which need the ``paths`` of the files): evaluating on one's own files takes a spec."""
+    from pydantic import ValidationError
+
+    from mocap.errors import UserError
+
+    component = plugins.get("motion_source", name)
+    if component.params is not None:
+        try:
+            component.params.model_validate({})
+        except ValidationError as exc:
+            fields = ", ".join(sorted({".".join(str(part) for part in err["loc"]) or "params" for err in exc.errors()}))
+            raise UserError(
+                f"{option} {name}: the motion source {name!r} needs params ({fields}), which {option} cannot give; to evaluate "
+                f"on your own files, write a spec whose motions: section is {{name: {name}, params: {{{fields}: ...}}}} and whose "
+                "imitator (and latent) name their checkpoint: files, then `mocap eval that.yaml`"
+            ) from None
+    return component.build(None)
+
+
 def build_evaluation_target(target: EvalTarget, plugins: Any, *, motions: str | None = None, device: str = "cpu", use_latent: bool = True) -> LoadedTarget:
     """Build the skeleton, motion library (``motions``: another source, default params), the
     imitator, the latent space (when ``target`` has one and ``use_latent``) and the simulator factory."""
@@ -287,7 +309,7 @@ def build_evaluation_target(target: EvalTarget, plugins: Any, *, motions: str | 
     if motions is None:
         source = plugins.get("motion_source", spec.motions.name).build(resolved.params.get("motions"))
     else:
-        source = plugins.get("motion_source", motions).build({})
+        source = motion_source_by_name(plugins, motions)
     lib = MotionLibrary(source.load(skeleton), skeleton)
     sim_component = plugins.get("simulator", spec.simulator.name)
     sim_params = resolved.params.get("simulator")
@@ -330,4 +352,4 @@ def build_evaluation_target(target: EvalTarget, plugins: Any, *, motions: str | 
     return LoadedTarget(target, skeleton, lib, imitator, latent, label, policy, make_sim)
 
 
-__all__ = ["EvalTarget", "LoadedTarget", "build_evaluation_target", "check_trained_humanoid", "load_evaluation_target"]
+__all__ = ["EvalTarget", "LoadedTarget", "build_evaluation_target", "check_trained_humanoid", "load_evaluation_target", "motion_source_by_name"]

@@ -167,9 +167,14 @@ def register_commands(app):  # type: ignore[no-untyped-def]
         from mocap.eval_targets import build_evaluation_target, load_evaluation_target
         from mocap.imitation_eval import _cell, compare_tables, evaluate_imitator, record_video, render_comparison
         from mocap.metrics import PROTOCOL, default_metrics
-        from mocap.paths import safe_filename
+        from mocap.paths import check_output_dir, check_output_file, safe_filename, write_output_text
         from mocap.plugins import get_plugins
 
+        check_eval_options(num_envs, loop)
+        if json_out is not None:  # output paths before any evaluation runs
+            check_output_file(json_out, "--json")
+        if video is not None:
+            check_output_dir(video, "--video")
         console = Console(stderr=True)
         plugins = get_plugins()
         target_info = load_evaluation_target(target, plugins)
@@ -207,11 +212,9 @@ def register_commands(app):  # type: ignore[no-untyped-def]
             table["comparison"] = compare_tables(teacher, table)
             stdout.print(render_comparison({spec.imitator.name + " (teacher)": teacher, what: table}, table["comparison"], console_table=True))
         if json_out is not None:
-            json_out.parent.mkdir(parents=True, exist_ok=True)
-            json_out.write_text(json.dumps(table, indent=2) + "\n")
+            write_output_text(json_out, json.dumps(table, indent=2) + "\n", "--json")
             stdout.print(f"wrote {json_out}")
         if video is not None:
-            video.mkdir(parents=True, exist_ok=True)
             for name in lib.clip_names:
                 seconds = loop if (loop and bool(lib.loops[lib.clip_index(name)])) else float(lib.durations[lib.clip_index(name)])
                 path = record_video(imitator, lib, make_sim, name, seconds, video / f"{safe_filename(name)}.mp4")
@@ -219,6 +222,19 @@ def register_commands(app):  # type: ignore[no-untyped-def]
                     console.print("[yellow]videos skipped[/]: the simulator cannot render")
                     break
                 console.print(f"video: {path}")
+
+
+def check_eval_options(num_envs: int, loop: float | None) -> None:
+    """``mocap eval``'s counts, checked before anything loads: one :class:`~mocap.errors.UserError`
+    line naming the option (not the protocol params' validation error)."""
+    import math
+
+    from mocap.errors import UserError
+
+    if num_envs < 1:
+        raise UserError(f"--num-envs {num_envs}: give the number of clips simulated in parallel, at least 1")
+    if loop is not None and not (math.isfinite(loop) and loop > 0):
+        raise UserError(f"--loop {loop}: give the seconds looping clips keep cycling, a positive finite number")
 
 
 @hookimpl

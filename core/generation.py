@@ -154,9 +154,14 @@ def register_commands(app):  # type: ignore[no-untyped-def]
         from mocap.errors import UserError
         from mocap.eval_targets import build_evaluation_target, load_evaluation_target
         from mocap.generation_eval import generate_from_target
+        from mocap.paths import check_output_file, write_output_text
         from mocap.plugins import get_plugins
         from mocap.task_eval import split_clips
 
+        if json_out is not None:  # output paths before the rollouts
+            check_output_file(json_out, "--json")
+        if video is not None:
+            check_output_file(video, "--video", video=True)
         console = Console(stderr=True)
         plugins = get_plugins()
         target_info = load_evaluation_target(target, plugins)
@@ -175,8 +180,7 @@ def register_commands(app):  # type: ignore[no-untyped-def]
         print(render_generation({target_info.spec.latent.name: result}))
         print(render_falls_by_start_clip(result))
         if json_out is not None:
-            json_out.parent.mkdir(parents=True, exist_ok=True)
-            json_out.write_text(json.dumps(result, indent=2) + "\n")
+            write_output_text(json_out, json.dumps(result, indent=2) + "\n", "--json")
             console.print(f"wrote {json_out}")
         if result.get("video"):
             console.print(f"video: {result['video']}")

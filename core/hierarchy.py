@@ -55,8 +55,11 @@ def register_commands(app):  # type: ignore[no-untyped-def]
         import json
 
         from mocap.errors import UserError
+        from mocap.paths import check_output_file, write_output_text
         from mocap.task_eval import evaluate_task, render_task_eval, split_clips
 
+        if json_out is not None:  # before the rollouts
+            check_output_file(json_out, "--json")
         try:
             clips = None if start_clips is None else split_clips(start_clips)
             result = evaluate_task(run_dir, num_envs=envs, seconds=seconds, seed=seed, start_clips=clips)
@@ -67,8 +70,7 @@ def register_commands(app):  # type: ignore[no-untyped-def]
         if policy.is_relative_to(Path.cwd().resolve()):  # a committed result names no path of this machine
             result["policy"] = str(policy.relative_to(Path.cwd().resolve()))
         if json_out is not None:
-            json_out.parent.mkdir(parents=True, exist_ok=True)
-            json_out.write_text(json.dumps(result, indent=2) + "\n")
+            write_output_text(json_out, json.dumps(result, indent=2) + "\n", "--json")
             print(f"wrote {json_out}")
 
 

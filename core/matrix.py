@@ -438,10 +438,26 @@ KEY_METRICS = (
 )
 
 
+def _success_count(metrics: dict[str, MetricSummary], key: str) -> str | None:
+    """``"14/15"`` for a success rate whose stage also recorded the count and the total (``succeeded``,
+    ``total``); ``"13.7/15 ± 0.8 (n=3)"`` over several seeds; None where they are missing."""
+    if not key.endswith("success_rate"):
+        return None
+    base = key[: -len("success_rate")]
+    succeeded, total = metrics.get(base + "succeeded"), metrics.get(base + "total")
+    if succeeded is None or total is None:
+        return None
+    if succeeded["ci95"] is None or succeeded["n"] < 2:
+        return f"{succeeded['mean']:.0f}/{total['mean']:.0f}"
+    return f"{succeeded['mean']:.3g}/{total['mean']:.0f} ± {succeeded['ci95']:.2g} (n={succeeded['n']})"
+
+
 def render(summary: dict[str, dict[str, MetricSummary]]) -> str:
     present = [m for m in KEY_METRICS if any(m in g for g in summary.values())]
     if not present:
         present = sorted(set().union(*(g.keys() for g in summary.values())))[:8]
+    # a success rate is shown as the count it comes from (14/15): its separate count column goes
+    present = [m for m in present if not (m.endswith("/succeeded") and m[: -len("succeeded")] + "success_rate" in present)]
     head = ["cell", *(metric_label(m) for m in present)]
     several = any(v.get("n", 1) > 1 for g in summary.values() for v in g.values())
     note = (
@@ -455,7 +471,8 @@ def render(summary: dict[str, dict[str, MetricSummary]]) -> str:
         cells = []
         for m in present:
             v = metrics.get(m)
-            cells.append("" if v is None else format_cell(v["mean"], v.get("ci95"), int(v.get("n", 1))))
+            count = _success_count(metrics, m)
+            cells.append(count if count is not None else "" if v is None else format_cell(v["mean"], v.get("ci95"), int(v.get("n", 1))))
         lines.append("| " + " | ".join([key, *cells]) + " |")
     return "\n".join(lines) + "\n"
 

@@ -117,7 +117,10 @@ def mean_ci95(values: list[float]) -> tuple[float, float | None]:
 
 
 def format_cell(mean: float, half: float | None, n: int) -> str:
-    """``"12.3"`` for one run, ``"12.3 ± 1.4 (n=3)"`` for several."""
+    """``"12.3"`` for one run, ``"12.3 ± 1.4 (n=3)"`` for several; ``"-"`` for NaN (nothing to measure,
+    e.g. the time to fall of rollouts that never fell)."""
+    if math.isnan(mean):
+        return "-"
     if half is None or n < 2:
         return f"{mean:.3g}"
     return f"{mean:.3g} ± {half:.2g} (n={n})"

@@ -305,6 +305,7 @@ def register_commands(app: Any) -> None:
         from rich.console import Console
 
         from mocap.eval_targets import build_evaluation_target, load_evaluation_target
+        from mocap.paths import check_output_file, write_output_text
         from mocap.plugins import get_plugins
 
         from mocap.errors import UserError
@@ -317,6 +318,8 @@ def register_commands(app: Any) -> None:
         rule: VelocityMode | None = "forward" if velocities == "forward" else "central_smoothed" if velocities else None
         if velocity_sigma is not None and not 0 < velocity_sigma <= 100:
             raise UserError(f"--velocity-sigma must be in (0, 100] frames, got {velocity_sigma:g}")
+        if json_out is not None:  # before the rollouts
+            check_output_file(json_out, "--json")
         console = Console(stderr=True)
         plugins = get_plugins()
         info = load_evaluation_target(target, plugins)
@@ -335,8 +338,7 @@ def register_commands(app: Any) -> None:
         stdout = Console(width=None if sys.stdout.isatty() else 160)
         stdout.print(render_noisy(result))
         if json_out is not None:
-            json_out.parent.mkdir(parents=True, exist_ok=True)
-            json_out.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
+            write_output_text(json_out, json.dumps(result, indent=2) + "\n", "--json")
             stdout.print(f"wrote {json_out}")
 
 

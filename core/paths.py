@@ -58,4 +58,58 @@ def check_output_dir(path: Path, option: str = "--out") -> None:
         raise UserError(f"{option} {path}: not writable ({exc.strerror or exc}); choose another {option}") from None
 
 
-__all__ = ["MAX_STEM", "check_output_dir", "confined", "safe_filename"]
+#: the video files the renderers write
+VIDEO_SUFFIXES = (".mp4", ".gif")
+#: the longest file name most file systems take, bytes
+MAX_NAME_BYTES = 255
+
+
+def check_output_file(path: Path, option: str, *, video: bool = False) -> Path:
+    """Raise :class:`UserError` unless ``path`` can be written as a file, before any work starts:
+    (``video``) a ``.mp4`` or ``.gif`` name; not a directory or a device; a name the file system
+    takes; its folder existing (it is not created) and writable. Every command that writes a file
+    the user named checks it here; returns ``path``."""
+    import os
+
+    from mocap.errors import UserError
+
+    path = Path(path)
+    shown = repr(str(path)) if video else str(path)
+    if video and path.suffix.lower() not in VIDEO_SUFFIXES:
+        raise UserError(f"{option} {shown}: the video must be a {' or '.join(VIDEO_SUFFIXES)} file")
+    if len(path.name.encode("utf-8", "surrogatepass")) > MAX_NAME_BYTES:
+        raise UserError(f"{option} {shown[:80]}...: the file name is longer than {MAX_NAME_BYTES} bytes; choose a shorter one")
+    try:
+        if path.is_dir():
+            raise UserError(f"{option} {shown}: a directory; give a file name (e.g. {path / ('out.mp4' if video else 'out.json')})")
+        if path.exists() and not path.is_file():
+            raise UserError(f"{option} {shown}: not a regular file; give a file name in a folder you can write")
+        folder = path.parent
+        for existing in (folder, *folder.parents):
+            if existing.exists():
+                if not existing.is_dir():
+                    raise UserError(f"{option} {shown}: {existing} is a file, not a folder; choose another path")
+                break
+        if not folder.is_dir():
+            raise UserError(f"{option} {shown}: the folder {folder} does not exist; create it or choose another path")
+    except OSError as exc:  # e.g. a path longer than the file system allows (ENAMETOOLONG)
+        raise UserError(f"{option} {shown[:200]}: not a usable path ({exc.strerror or exc}); choose another path") from None
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise UserError(f"{option} {shown}: not writable (permission denied); choose another path")
+    return path
+
+
+def write_output_text(path: Path, text: str, option: str) -> None:
+    """Write ``text`` to a file the user named (:func:`check_output_file`, then an atomic write); a
+    write that fails (a full disk, a read-only file system) is a :class:`UserError` naming it."""
+    from mocap.checkpoint import StorageError, atomic_write_text
+    from mocap.errors import UserError
+
+    check_output_file(path, option)
+    try:
+        atomic_write_text(Path(path), text)
+    except StorageError as exc:
+        raise UserError(f"{option} {exc}") from None
+
+
+__all__ = ["MAX_STEM", "VIDEO_SUFFIXES", "check_output_dir", "check_output_file", "confined", "safe_filename", "write_output_text"]

@@ -41,6 +41,7 @@ from mocap.errors import StageFailed  # noqa: F401  (defined there, re-exported)
 from mocap.checkpoint import atomic_write_json, atomic_write_text, hardware, package_versions
 from mocap.interfaces import RLTrainable, StageResult, Trainer
 from mocap.plugins import PluginError, PluginSet
+from mocap.run_record import PUBLISHED_DIR, RunRecord, copy_published
 from mocap.runlog import MetricsLogger
 from mocap.skeleton import Skeleton
 from mocap.spec import STAGES, ResolvedSpec, Spec, StageSpec
@@ -58,7 +59,6 @@ from mocap.stage_keys import (  # noqa: F401  (re-exported)
 )
 
 DONE_FILE = "DONE.json"
-PUBLISHED_DIR = "published"  # files a stage publishes to the run directory, kept for reuse
 
 
 class PipelineInterrupted(Exception):
@@ -337,8 +337,7 @@ def _as_trainer(trainer: Any, name: str) -> Trainer:
 
 def _run_pipeline_locked(resolved: ResolvedSpec, plugins: PluginSet, out_dir: Path, store: Path, console: Console, main: bool) -> list[StageRecord]:
     spec = resolved.spec
-    if main:
-        atomic_write_text(out_dir / "spec.yaml", resolved.to_yaml())
+    files = RunRecord(out_dir, resolved, main)
     if spec.torch_threads is not None:
         torch.set_num_threads(spec.torch_threads)
     device = dist.init(resolve_device(spec.device))  # under torchrun: join the group; this rank's device
@@ -348,7 +347,6 @@ def _run_pipeline_locked(resolved: ResolvedSpec, plugins: PluginSet, out_dir: Pa
     keys = {stage: material_key(m) for stage, m in materials.items()}
     earlier = earlier_keys(out_dir) if main else {}
     _preflight(resolved, plugins, keys, store)
-    records: list[StageRecord] = []
     upstream: dict[str, StageResult] = {}
     started = time.time()
     with _StopFlag(console) as stop:
@@ -356,13 +354,13 @@ def _run_pipeline_locked(resolved: ResolvedSpec, plugins: PluginSet, out_dir: Pa
             if stage not in keys:
                 continue
             why = why_new_key(store, stage, earlier.get(stage), materials[stage]) if earlier.get(stage) not in (None, keys[stage]) else None
-            record = _run_stage(stage, keys[stage], resolved, plugins, out_dir, store, upstream, device, console, stop, (materials[stage], why))
-            records.append(record)
+            record = _run_stage(stage, keys[stage], resolved, plugins, out_dir, store, upstream, device, console, stop, (materials[stage], why, files.start))
+            files.add(record)
             upstream[stage] = record.result
-            if main:
-                _write_stages(out_dir, records, spec.seed)
             if stop.requested:
                 raise PipelineInterrupted(stage)
+    files.start()
+    records = files.records
     if main:
         from mocap.report import write_report
 
@@ -388,7 +386,7 @@ def _run_stage(
     device: torch.device,
     console: Console,
     stop: _StopFlag,
-    key_info: tuple[dict[str, Any], str | None] = ({}, None),
+    key_info: tuple[dict[str, Any], str | None, Callable[[], None]] = ({}, None, lambda: None),
 ) -> StageRecord:
     if dist.is_main():
         store.mkdir(parents=True, exist_ok=True)
@@ -427,9 +425,9 @@ def _run_stage_locked(
     device: torch.device,
     console: Console,
     stop: _StopFlag,
-    key_info: tuple[dict[str, Any], str | None] = ({}, None),
+    key_info: tuple[dict[str, Any], str | None, Callable[[], None]] = ({}, None, lambda: None),
 ) -> StageRecord:
-    material, why = key_info
+    material, why, start_run = key_info  # start_run: this run writes its record from now on
     spec = resolved.spec
     section = getattr(spec, stage)
     workdir = store / f"{stage}-{key}"
@@ -440,11 +438,6 @@ def _run_stage_locked(
     reuse = dist.broadcast_object(_read_result(done) if main and done.is_file() else None)
     if reuse is not None:
         console.print(f"[green]{stage}[/]: reusing the trained artifact {workdir} (same {stage} section and upstream as an earlier run)")
-        published = workdir / PUBLISHED_DIR
-        if main and published.is_dir():  # the stage's tables and videos belong in this run directory too
-            for item in published.iterdir():
-                if item.is_file():
-                    shutil.copy2(item, out_dir / item.name)
         return StageRecord(stage, key, workdir, reuse, True, 0.0, _read_seconds(done) if main else None)
     checkpoint = getattr(section, "checkpoint", None)
     if checkpoint is not None:
@@ -459,6 +452,7 @@ def _run_stage_locked(
     if trainer_ref is None:
         console.print(f"[green]{stage}[/]: {section.name} needs no training")
         return StageRecord(stage, key, workdir, StageResult(checkpoint=None), False, 0.0)
+    start_run()  # a stage really starts: from here on the run directory is this run's
     if main:
         workdir.mkdir(parents=True, exist_ok=True)
         atomic_write_text(workdir / "spec.yaml", resolved.to_yaml())
@@ -509,11 +503,8 @@ def _run_stage_locked(
         raise
     finally:
         log.close()
-        published = workdir / PUBLISHED_DIR
-        if main and published.is_dir():
-            for item in published.iterdir():
-                if item.is_file():
-                    shutil.copy2(item, out_dir / item.name)
+        if main:
+            copy_published(workdir, out_dir)
     if parallel:
         # all ranks agree on an interruption (Ctrl-C reaching any of them) and on rank 0's result
         if dist.any_true(stop.requested):
@@ -560,24 +551,3 @@ def _read_seconds(done: Path) -> float | None:
     except (OSError, ValueError, AttributeError):
         return None
     return float(value) if isinstance(value, (int, float)) else None
-
-
-def _write_stages(out_dir: Path, records: list[StageRecord], seed: int | None = None) -> None:
-    atomic_write_json(
-        out_dir / "stages.json",
-        [
-            {
-                "stage": r.stage,
-                "key": r.key,
-                "seed": derive_seed(seed, r.stage) if seed is not None else None,
-                "artifact_dir": str(r.workdir),
-                "checkpoint": str(r.result.checkpoint) if r.result.checkpoint else None,
-                "metrics": r.result.metrics,
-                "reused": r.reused,
-                "seconds": round(r.seconds, 2),
-                "trained_seconds": round(r.trained_seconds, 2) if r.trained_seconds is not None else None,
-                **({"retrained_because": r.why} if r.why else {}),
-            }
-            for r in records
-        ],
-    )

@@ -467,10 +467,10 @@ def render_policy(
     from mocap.errors import UserError
     from mocap.eval_targets import build_evaluation_target, load_evaluation_target
     from mocap.imitation_eval import record_video
+    from mocap.paths import check_output_file
     from mocap.plugins import get_plugins
 
-    if Path(out).suffix.lower() not in (".mp4", ".gif"):
-        raise UserError(f"--out {str(out)!r}: the video must be a .mp4 or .gif file")
+    check_output_file(Path(out), "--out", video=True)
     if seconds is not None and not seconds > 0:
         raise UserError(f"--seconds must be positive, got {seconds:g}")
     from mocap.task_run import is_task_target

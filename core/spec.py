@@ -69,7 +69,7 @@ class Spec(_Strict):
         pattern=r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$",
     )
     description: str = ""
-    seed: int = Field(default=0, description="global seed; each stage derives its own from it")
+    seed: int = Field(default=0, ge=0, le=2**63 - 1, description="global seed; each stage derives its own from it")
     device: Literal["auto", "cpu", "cuda"] = Field(default="auto", description="torch device for networks")
     torch_threads: ThreadCount | None = Field(default=None, description="torch intra-op threads (None: leave the cores to the simulator threads)")
     humanoid: ComponentRef = Field(default_factory=lambda: ComponentRef(name="amp"))
@@ -226,6 +226,10 @@ def _yaml_load(text: str, source: str) -> Any:
         raise SpecError(source, [SpecIssue("", f"YAML syntax error: {problem}", line, col)]) from None
     except yaml.YAMLError as exc:
         raise SpecError(source, [SpecIssue("", f"YAML error: {exc}")]) from None
+    except ValueError as exc:  # a value YAML cannot build, e.g. an integer of more than 4,300 digits
+        text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        what = "a number of more than 4,300 digits" if "digits" in text else text[:200]
+        raise SpecError(source, [SpecIssue("", f"unreadable value: {what}")]) from None
 
 
 def deep_merge(base: Any, override: Any, _root: bool = True, replaced: list[tuple[str, Any, Any]] | None = None, _path: str = "") -> Any:

@@ -4,14 +4,17 @@ refused with one ``error:`` line, and older checkpoints convert once with an exp
 
 from __future__ import annotations
 
+import os
 import random
+import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
+from committed import committed_files
 
-from mocap.checkpoint import CheckpointError, convert_checkpoint, load_checkpoint
+from mocap.checkpoint import CheckpointError, convert_checkpoint, load_checkpoint, save_checkpoint
 from mocap.cli import main
 from mocap.rng import rng_state, set_rng_state
 
@@ -45,9 +48,51 @@ def test_the_payload_would_run_on_an_unrestricted_load(tmp_path):
 
 def test_load_checkpoint_refuses_a_pickle_payload(tmp_path):
     path, marker = _evil(tmp_path)
-    with pytest.raises(CheckpointError, match="refused.*pickled Python objects.*mocap checkpoint convert"):
+    with pytest.raises(CheckpointError, match=r"refused: the checkpoint names the global \w+\.exec, which mocap does not load") as err:
         load_checkpoint(path)
+    assert "convert" not in str(err.value)  # converting would run it: no such advice
     assert not marker.exists()
+
+
+class _Call:
+    """Unpickling this object calls ``func(*args)``."""
+
+    def __init__(self, func, *args):
+        self.func, self.args = func, args
+
+    def __reduce__(self):  # noqa: D105
+        return (self.func, self.args)
+
+
+@pytest.mark.parametrize("protocol", [2, 4, 5])
+@pytest.mark.parametrize("func, named", [(print, "print"), (os.system, "system")], ids=["print", "os.system"])
+def test_a_refused_global_is_named_not_called_corrupt_and_no_torch_warning_shows(tmp_path, capsys, protocol, func, named):
+    """Issue 63, newcomer 8 / fuzz 6: a pickle of protocol 4 or 5 fails in torch's restricted
+    unpickler before it names the global (``Unsupported operand 149``) and warns about the protocol;
+    the user gets "refused" naming the global, and no warning."""
+    path = tmp_path / "policy.pt"
+    torch.save({"format": "mocap.rl.policy/1", "x": _Call(func, "echo hi")}, path, pickle_protocol=protocol)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(CheckpointError, match=rf"refused: the checkpoint names the global \w+\.{named}, which mocap does not load") as err:
+            load_checkpoint(path)
+    assert "corrupt" not in str(err.value)
+    assert main(["eval", str(path)]) == 2
+    stderr = capsys.readouterr().err
+    assert "refused: the checkpoint names the global" in stderr and "Warning" not in stderr
+
+
+def test_converting_an_already_safe_checkpoint_leaves_it_byte_identical(tmp_path, capsys):
+    """Issue 63, newcomer 6: ``convert --trust`` of a file that already loads safely says so."""
+    path = tmp_path / "policy.pt"
+    save_checkpoint(path, {"format": "x/1", "w": torch.arange(3.0)})
+    before = path.read_bytes()
+    assert main(["checkpoint", "convert", str(path), "--trust"]) == 0
+    assert "already loads without running code" in capsys.readouterr().out
+    assert path.read_bytes() == before
+    assert convert_checkpoint(path) == path and path.read_bytes() == before
+    assert main(["checkpoint", "convert", str(path), "--out", str(tmp_path / "copy.pt")]) == 0
+    assert (tmp_path / "copy.pt").read_bytes() == before
 
 
 @pytest.mark.parametrize(
@@ -123,7 +168,7 @@ def test_convert_refuses_what_it_cannot_make_safe(tmp_path):
 
 
 def test_every_committed_checkpoint_loads_safely():
-    files = sorted(REPO.glob("checkpoints/*/*.pt"))
+    files = committed_files("checkpoints", "*/*.pt")
     assert files
     for f in files:
         assert isinstance(load_checkpoint(f), dict)
@@ -138,8 +183,8 @@ def test_committed_checkpoints_name_their_dependencies_by_relative_path():
     from mocap.plugins import get_plugins
 
     inside = (REPO / "checkpoints").resolve()
-    specs = [(f, load_checkpoint(f).get("spec") or "{}") for f in sorted(REPO.glob("checkpoints/*/*.pt"))]
-    specs += [(f, f.read_text()) for f in sorted(REPO.glob("checkpoints/*/spec.yaml"))]
+    specs = [(f, load_checkpoint(f).get("spec") or "{}") for f in committed_files("checkpoints", "*/*.pt")]
+    specs += [(f, f.read_text()) for f in committed_files("checkpoints", "*/spec.yaml")]
     for f, text in specs:
         doc = yaml.safe_load(text) or {}
         for stage in ("imitator", "latent", "task"):

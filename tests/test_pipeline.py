@@ -231,3 +231,24 @@ def test_a_phase_is_a_child_context_of_its_stage(tmp_path: Path):
     assert sub.should_stop()
     assert sub.publish("t.md").parent == ctx.publish("t.md").parent
     assert sub.phase("vae", workdir=tmp_path / "v").publish("a.md").parent == ctx.publish("a.md").parent
+
+
+def test_a_run_that_fails_before_any_stage_starts_leaves_the_finished_runs_record(tmp_path: Path):
+    """Issue 63, newcomer 3: a failed run (a missing ``checkpoint:``) into the directory of a finished
+    run must not rewrite its ``spec.yaml``, ``stages.json``, ``report.md`` or published files."""
+    from mocap.pipeline import StageFailed
+
+    out = tmp_path / "runs" / "a"
+    run_pipeline(resolve(), PSET, out, console=quiet())
+    # another run trains an imitator that publishes another count (which a reuse would copy)
+    run_pipeline(resolve(["imitator.trainer.params.iterations=4"]), PSET, tmp_path / "runs" / "b", console=quiet())
+    before = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file() and p.name != ".mocap-run.lock"}
+    assert {"spec.yaml", "stages.json", "report.md", "imitator_count.txt"} <= set(before)
+    failing = resolve(["imitator.trainer.params.iterations=4", "latent.trainer=null", f"latent.checkpoint={tmp_path / 'nothere.pt'}"])
+    with pytest.raises(StageFailed, match="nothere.pt: no such file"):
+        run_pipeline(failing, PSET, out, console=quiet())
+    after = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file() and p.name != ".mocap-run.lock"}
+    assert after == before
+    # a run that does start a stage owns the directory from then on
+    run_pipeline(resolve(["latent.trainer.params.iterations=3"]), PSET, out, console=quiet())
+    assert "iterations: 3" in (out / "spec.yaml").read_text().split("latent:")[1]

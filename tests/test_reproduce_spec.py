@@ -1,6 +1,7 @@
-"""``specs/reproduce/bundled.yaml`` retrains every committed checkpoint from nothing: the imitator
-stage is trained (not loaded), shared by every cell (one artifact key: trained once), and each
-latent cell uses the recipe of its spec in ``specs/latent/``."""
+"""``specs/reproduce/bundled.yaml`` retrains the four first-generation models from nothing: the
+imitator stage is trained (not loaded), shared by every cell (one artifact key: trained once), and
+each latent cell uses the recipe of its spec in ``specs/latent/``. Every other committed checkpoint
+is accounted for by the spec that continued it (tested below and in the files named there)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from pathlib import Path
 
 import pytest
 import torch
+from committed import committed_files
 
 from mocap.matrix import load_cells
 from mocap.pipeline import stage_keys
@@ -39,7 +41,7 @@ def test_reproduce_spec_trains_everything_and_shares_the_imitator():
     plugins = get_plugins()
     cells = {cell.name: resolved for cell, resolved in load_cells(SPEC, plugins)}
     assert set(cells) == {"latent-none", "latent-pulse", "latent-hybrid_rvq", "latent-vmp"}
-    committed = {p.parent.name for p in (ROOT / "checkpoints").glob("*/*.pt")}
+    committed = {p.parent.name for p in committed_files("checkpoints", "*/*.pt")}  # tracked by git: not a user's export
     latents = {f"{r.spec.latent.name}_amp" for r in cells.values() if r.spec.latent is not None}
     # imitator _v2 and _v3: the same recipe trained further; vmp_amp: an earlier recipe, superseded by vmp_amp_v2;
     # vmp_amp_m: the M-conditioning ablation of the vmp cell; pulse_amp_v2: the pulse recipe with the
@@ -385,3 +387,35 @@ def test_the_v15_task_specs_compare_the_latents_at_equal_ppo_budgets(task):
     assert {latent: s.task.name for latent, s in specs.items()} == dict.fromkeys(specs, task)
     hp = {latent: (s.humanoid.name, s.humanoid.params) for latent, s in specs.items()}
     assert len({(n, tuple(sorted(p.items()))) for n, p in hp.values()}) == 1, hp
+
+
+def test_a_users_export_into_checkpoints_is_no_committed_checkpoint(tmp_path):
+    """Issue 63, newcomer 7: the README's ``mocap export runs/pulse-amp-v20 checkpoints/my_pulse``
+    writes an untracked folder; the committed-checkpoint tests count only what git tracks."""
+    import subprocess
+
+    for name in ("imitator", "my_pulse"):
+        (tmp_path / "checkpoints" / name).mkdir(parents=True)
+        (tmp_path / "checkpoints" / name / "policy.pt").write_bytes(b"x")
+    git = ["git", "-C", str(tmp_path), "-c", "user.name=t", "-c", "user.email=t@t"]
+    subprocess.run([*git, "init", "-q"], check=True)
+    subprocess.run([*git, "add", "checkpoints/imitator"], check=True)
+    subprocess.run([*git, "commit", "-qm", "one checkpoint"], check=True)
+    assert committed_files("checkpoints", "*/*.pt", root=tmp_path) == [tmp_path / "checkpoints" / "imitator" / "policy.pt"]
+    assert {p.parent.name for p in committed_files("checkpoints", "*/*.pt")} >= {"imitator", "pulse"}  # this repository's
+
+
+def test_the_reproduce_spec_says_exactly_what_it_retrains():
+    """Issue 63, newcomer 9: bundled.yaml and the README said "every committed checkpoint"; it
+    retrains four first-generation models, none of the canonical ones or any task policy."""
+    import re
+
+    text = SPEC.read_text()
+    description = load_cells(SPEC, get_plugins())[0][1].spec.description or ""
+    for name in ("imitator_amp", "pulse_amp", "hybrid_rvq_amp", "vmp_amp_v2"):
+        assert re.search(rf"\b{name}\b", description) and (ROOT / "checkpoints" / name).is_dir(), name
+    assert "not the canonical checkpoints or any task policy" in description
+    assert "does NOT retrain the canonical checkpoints" in text
+    for path in (SPEC, ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))):
+        flat = " ".join(path.read_text().split())
+        assert not re.search(r"every committed checkpoint (retrained )?from nothing|retrains? every committed", flat), path

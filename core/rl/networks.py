@@ -275,14 +275,18 @@ def save_policy(path: Path, model: ActorCritic, extra: dict[str, Any] | None = N
 def load_policy(path: Path, map_location: str | torch.device = "cpu") -> ActorCritic:
     """Rebuild the :class:`ActorCritic` saved by :func:`save_policy`, or the current policy inside a
     trainer's resumable checkpoint (PPO's ``ppo.pt``), in eval mode on ``map_location``."""
+    from mocap.rl.policy_config import check_policy_config, check_state_dict
+
     data = load_checkpoint(Path(path), map_location=map_location)
     if data.get("format") == POLICY_FORMAT:
-        config, state = data["config"], data["state_dict"]
+        config, state = data.get("config"), data.get("state_dict")
     elif "policy_config" in data and "model" in data:  # a trainer's resumable checkpoint (e.g. ppo.pt mid-training)
         config, state = data["policy_config"], data["model"]
     else:  # a CheckpointError: another file, or another version of the policy format (both versions named)
         check_format(Path(path), data, POLICY_FORMAT, what="policy")
         raise CheckpointError(f"{path}: not a policy file")  # pragma: no cover - check_format raised
+    config = check_policy_config(Path(path), config)  # types, ranges and size before any allocation
+    state = check_state_dict(Path(path), state)
     try:
         model = ActorCritic.from_config(config)
         model.load_state_dict(state)

@@ -10,7 +10,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from mocap.bounds import EnvCount, LayerWidth, LearningRate, LogStd, ThreadCount
+from mocap.bounds import MAX_BATCH, MAX_HORIZON, EnvCount, EnvSteps, EpochCount, LayerWidth, LearningRate, LogStd, ThreadCount
 from mocap.roles import Box
 
 
@@ -20,11 +20,11 @@ class PPOParams(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     num_envs: EnvCount = Field(128, description="parallel envs (PHC: 1536)")
-    horizon: int = Field(64, ge=1, description="steps per env per iteration; batch = num_envs × horizon (PHC: 32)")
+    horizon: int = Field(64, ge=1, le=MAX_HORIZON, description="steps per env per iteration; batch = num_envs × horizon (PHC: 32)")
     max_consecutive_faults: int = Field(10, ge=0, description="stop after this many consecutive batches with non-finite values (each is skipped); 0: only skip")
-    total_env_steps: int = Field(10_000_000, ge=1, description="training budget in env steps (rounded up to whole iterations)")
-    epochs: int = Field(4, ge=1, description="passes over each batch (PHC: 6 mini-epochs)")
-    minibatch_size: int = Field(2048, ge=1, description="samples per gradient step; ≤ batch; a remainder is dropped each epoch (PHC: 16384)")
+    total_env_steps: EnvSteps = Field(10_000_000, description="training budget in env steps (rounded up to whole iterations)")
+    epochs: EpochCount = Field(4, description="passes over each batch (PHC: 6 mini-epochs)")
+    minibatch_size: int = Field(2048, ge=1, le=MAX_BATCH, description="samples per gradient step; ≤ batch; a remainder is dropped each epoch (PHC: 16384)")
     lr: LearningRate = Field(3e-4, description="Adam learning rate (PHC: 2e-5)")
     lr_schedule: Literal["constant", "linear", "adaptive"] = Field(
         "constant",
@@ -98,6 +98,11 @@ class PPOParams(BaseModel):
 
     @model_validator(mode="after")
     def _minibatch_fits(self) -> "PPOParams":
+        if self.num_envs * self.horizon > MAX_BATCH:
+            raise ValueError(
+                f"the batch num_envs × horizon = {self.num_envs * self.horizon:,} samples exceeds {MAX_BATCH:,} "
+                "(its buffers are allocated whole); lower num_envs or horizon"
+            )
         if self.minibatch_size > self.num_envs * self.horizon:
             raise ValueError(f"minibatch_size {self.minibatch_size} exceeds the batch num_envs × horizon = {self.num_envs * self.horizon}")
         if self.init_log_std is not None and self.init_policy is None:

@@ -76,10 +76,15 @@ def register_commands(app: Any) -> None:
         from rich.progress import Progress
 
         from mocap.eval_targets import build_evaluation_target, load_evaluation_target
+        from mocap.paths import check_output_file, write_output_text
         from mocap.plugins import get_plugins
         from mocap_phc.recovery_eval import RecoveryEvalParams, evaluate_recovery
         from mocap_phc.recovery_planner import GetUpPlanner, GetUpPlannerParams
 
+        if json_out is not None:  # output paths before the rollouts
+            check_output_file(json_out, "--json")
+        if video is not None:
+            check_output_file(video, "--video", video=True)
         console = Console(stderr=True)
         plugins = get_plugins()
         info = load_evaluation_target(target, plugins)
@@ -132,5 +137,4 @@ def register_commands(app: Any) -> None:
             + (f"; get-up planner: stood up {res['stood_up_rate']:.1%}" if plan is not None else "")
         )
         if json_out is not None:
-            json_out.parent.mkdir(parents=True, exist_ok=True)
-            json_out.write_text(json.dumps(res, indent=2) + "\n", encoding="utf-8")
+            write_output_text(json_out, json.dumps(res, indent=2) + "\n", "--json")

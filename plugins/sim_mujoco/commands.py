@@ -60,6 +60,7 @@ def cmd_render(
 ) -> None:
     """Render a motion clip (--motion: kinematic playback) or a policy's rollout (TARGET) to an MP4 or GIF video."""
     from mocap.motion.commands import load_motion_set
+    from mocap.paths import check_output_file
 
     if target is not None and motion is not None:
         raise _fail("give a TARGET (a policy's rollout) or --motion (kinematic playback), not both")
@@ -68,8 +69,7 @@ def cmd_render(
     if target is None and (clip is not None or generate):
         raise _fail("--clip and --generate need a TARGET policy; kinematic playback takes --motion")
     out_path = out if out is not None else Path(f"{motion or ('generate' if generate else clip or 'rollout')}.mp4")
-    if out_path.suffix.lower() not in (".mp4", ".gif"):
-        raise _fail(f"--out {str(out_path)!r}: the video must be a .mp4 or .gif file")
+    check_output_file(out_path, "--out", video=True)  # a .mp4 / .gif in a folder that exists, before any work
     if not fps > 0 or fps > 1000:
         raise _fail(f"--fps must be in (0, 1000], got {fps:g}")
     if not (16 <= width <= 8192 and 16 <= height <= 8192):
