@@ -334,11 +334,17 @@ def make_task_env(ctx: Any, num_envs: int) -> TaskEnv:
         from mocap.distill_files import load_latent_state
 
         label = str(load_latent_state(latent_ckpt)["extra"].get("label", "policy_output"))
-    if label == "pd_targets":
-        mapping: Callable[[Observations, Tensor], Tensor] = lambda obs, out: out  # noqa: E731
-    else:
+    # the teacher's proprioception layout (its 6D convention): what the latent space was distilled on
+    imitator = None
+    if spec.imitator is not None:
         imitator_stage = ctx.upstream.get("imitator")
         imitator = ctx.stage_component("imitator", checkpoint=imitator_stage.checkpoint if imitator_stage else None)
+    sixd: SixD = imitator.proprio_sixd if imitator is not None else "zhou"
+    if label == "pd_targets":
+        mapping: Callable[[Observations, Tensor], Tensor] = lambda obs, out: out  # noqa: E731
+    elif imitator is None:
+        raise StageFailed(f"the latent space's actions are its teacher's raw output (label {label!r}): the spec needs its imitator section")
+    else:
         mapping = imitator.to_pd_targets
     sim_ref = spec.simulator
     sim_params = ctx.params("simulator")
@@ -347,7 +353,7 @@ def make_task_env(ctx: Any, num_envs: int) -> TaskEnv:
         sim_params = type(sim_params).model_validate({**sim_params.model_dump(), **overrides})
     sim = ctx.plugins.get("simulator", sim_ref.name).build(sim_params, skeleton=skeleton, num_envs=num_envs, seed=ctx.seed)
     try:
-        env = TaskEnv(task, latent, mapping, library, sim, seed=ctx.seed, warn=lambda text: ctx.console.print(text, style="yellow", markup=False))
+        env = TaskEnv(task, latent, mapping, library, sim, seed=ctx.seed, sixd=sixd, warn=lambda text: ctx.console.print(text, style="yellow", markup=False))
     except ValueError as exc:  # e.g. the generation task with scratch (no prior)
         sim.close()
         raise StageFailed(f"task {task_ref.name} with latent {spec.latent.name}: {exc}") from None

@@ -81,3 +81,43 @@ def test_task_eval_table_shows_display_names_and_units() -> None:
     assert "| mystery | `mystery` | 2 |" in table  # undeclared: the key itself
     # the installed tasks' declarations by default
     assert "speed error (m/s)" in render_task_eval(result)
+
+
+def test_a_task_env_uses_its_teachers_proprioception_layout(tmp_path: Path) -> None:
+    """Issue 60 item 4: the task env observes proprioception in the 6D layout of the imitator the latent
+    space was distilled from (``Imitator.proprio_sixd``); a ``tan_norm`` teacher (PHC's SMPL recipe)
+    got ``zhou`` features before."""
+    import io
+
+    from rich.console import Console
+
+    from mocap.observations import proprioception
+    from mocap.pipeline import StageContext
+    from mocap.runlog import MetricsLogger
+    from mocap.spec import load_spec_text
+    from mocap.task_env import make_task_env
+
+    text = """
+spec_version: 1
+name: sixd
+humanoid: {name: amp}
+motions: {name: deepmimic, params: {clips: [walk]}}
+simulator: {name: mujoco}
+imitator: {name: phc, params: {sixd: tan_norm}, trainer: {name: ppo}}
+latent: {name: scratch}
+task: {name: speed, trainer: {name: ppo}}
+"""
+    plugins = get_plugins()
+    resolved = load_spec_text(text, plugins)
+    log = MetricsLogger(tmp_path / "metrics.jsonl", "task")
+    ctx = StageContext("task", resolved, plugins, tmp_path, tmp_path, {}, log, 0, torch.device("cpu"), Console(file=io.StringIO()))
+    env = make_task_env(ctx, 2)
+    try:
+        obs = env.reset()
+        assert env.sixd == "tan_norm"
+        expect = proprioception(env.sim.state, "tan_norm").float()
+        assert torch.allclose(obs[:, : expect.shape[1]], expect, atol=1e-5)
+        assert not torch.allclose(expect, proprioception(env.sim.state, "zhou").float(), atol=1e-3)
+    finally:
+        env.close()
+        log.close()
