@@ -194,12 +194,9 @@ class StageContext:
             from mocap.task_env import make_task_env
 
             return make_task_env(self, num_envs)
-        try:
-            component = self.stage_component()
-        except TypeError:  # a task factory (params, *, skeleton, num_envs, device): it runs through a latent space
-            component = None
-        if self.stage == "task" and not isinstance(component, RLTrainable):
+        if self.stage == "task":  # a task runs through a latent space (its factory takes num_envs, not a checkpoint)
             raise StageFailed("the task stage needs a latent space (use `latent: {name: scratch}` for a policy without one)")
+        component = self.stage_component()
         if not isinstance(component, RLTrainable):
             raise StageFailed(f"{self.stage} {getattr(self.spec, self.stage).name!r} cannot be trained by RL (it is not RLTrainable: no make_env)")
         return component.make_env(self, num_envs)

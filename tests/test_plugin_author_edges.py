@@ -121,3 +121,33 @@ task: {name: speed, trainer: {name: ppo}}
     finally:
         env.close()
         log.close()
+
+
+def test_a_factorys_own_type_error_is_not_hidden_behind_not_rl_trainable(tmp_path: Path) -> None:
+    """Issue 60 item 4: no ``except TypeError`` control flow in ``StageContext.make_rl_env``: a bug
+    inside an imitator's factory surfaces as itself."""
+    import io
+    import types
+
+    from rich.console import Console
+
+    from mocap.hooks import hookimpl
+    from mocap.pipeline import StageContext
+    from mocap.plugins import load_plugins
+    from mocap.runlog import MetricsLogger
+    from mocap.spec import load_spec_text
+
+    def broken(*, skeleton, checkpoint=None, device="cpu"):  # type: ignore[no-untyped-def]  (no params model: called without params)
+        raise TypeError("the author's own bug")
+
+    plugin = types.SimpleNamespace(register_imitators=hookimpl(lambda register: register("broken_imitator", broken)))
+    plugins = load_plugins([("broken", plugin)])
+    text = (
+        "spec_version: 1\nname: b\nhumanoid: {name: amp}\nmotions: {name: deepmimic}\nsimulator: {name: mujoco}\n"
+        "imitator: {name: broken_imitator, trainer: {name: ppo}}\n"
+    )
+    log = MetricsLogger(tmp_path / "metrics.jsonl", "imitator")
+    ctx = StageContext("imitator", load_spec_text(text, plugins), plugins, tmp_path, tmp_path, {}, log, 0, torch.device("cpu"), Console(file=io.StringIO()))
+    with pytest.raises(TypeError, match="the author's own bug"):
+        ctx.make_rl_env(2)
+    log.close()
