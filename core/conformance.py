@@ -24,7 +24,7 @@ from typing import Any, Callable, Mapping
 import torch
 from torch import Tensor
 
-from mocap.interfaces import Box, LatentSample, LatentSpace, MultiDiscrete, Simulator, Task
+from mocap.interfaces import Box, ExternalWrench, LatentSample, LatentSpace, MovableTarget, MultiDiscrete, PerEnvModels, Simulator, Task
 from mocap.kinematics import forward_kinematics_dofs
 from mocap.sim_snapshot import load_sim_state, save_sim_state
 from mocap.skeleton import Skeleton
@@ -99,7 +99,9 @@ def check_simulator(sim: Simulator, steps: int = 3) -> list[str]:
     ``state`` of the declared shapes; ``reset`` of a subset of
     envs puts them at the given pose; ``step`` with (N, D) PD targets returns finite states and a
     wrongly shaped action is a ValueError; ``get_physics_state`` / ``set_physics_state``
-    round-trip when offered."""
+    round-trip when offered; and each optional capability it declares (:class:`MovableTarget` when
+    built with its prop: the target lands where it was put; :class:`ExternalWrench`: a zero wrench is
+    accepted; :class:`PerEnvModels`: one model per env)."""
     sk, N = sim.skeleton, sim.num_envs
     _require(isinstance(sim.dt, float) and sim.dt > 0, f"Simulator.dt must be a positive float, got {sim.dt!r}")
     _require(isinstance(sim.device, torch.device), f"Simulator.device must be a torch.device, got {sim.device!r}")
@@ -134,6 +136,28 @@ def check_simulator(sim: Simulator, steps: int = 3) -> list[str]:
         sim.set_physics_state(torch.arange(N), saved, as_reset=False)
         _require(bool(torch.allclose(sim.state.dof_pos, before)), "Simulator.set_physics_state does not restore get_physics_state")
         report.append("physics state round-trip")
+    return report + _check_capabilities(sim)
+
+
+def _check_capabilities(sim: Simulator) -> list[str]:
+    """The optional simulator capabilities of :mod:`mocap.interfaces` that ``sim`` declares."""
+    N, B = sim.num_envs, sim.skeleton.num_bodies
+    report = []
+    if isinstance(sim, MovableTarget) and sim.has_target:
+        pos = torch.tensor([[3.0, 0.5 + i, 0.5] for i in range(N)])
+        sim.set_target(torch.arange(N), pos)
+        target = sim.target_state()
+        _require(tuple(target.pos.shape) == (N, 3) and tuple(target.rot.shape) == (N, 4), "MovableTarget.target_state: expected (N, 3) pos, (N, 4) rot")
+        _require(
+            bool(torch.allclose(target.pos.double().cpu(), pos.double(), atol=1e-4)), "MovableTarget.target_state: the target is not where set_target put it"
+        )
+        report.append("movable target")
+    if isinstance(sim, ExternalWrench):
+        sim.set_external_wrench(torch.arange(N), torch.zeros(N, B, 6))
+        report.append("external wrench")
+    if isinstance(sim, PerEnvModels):
+        _require(len(sim.env_models()) == N, "PerEnvModels.env_models: expected one model per env")
+        report.append("per-env models")
     return report
 
 

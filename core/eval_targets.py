@@ -60,7 +60,7 @@ _POLICY_NAMES = ("latent.pt", "policy.pt")
 
 
 def _stage_checkpoint(spec: Any, stage: str) -> Path | None:
-    section = getattr(spec, stage, None)
+    section = getattr(spec, stage)  # a Spec field (imitator, latent, task): None when the spec has no such stage
     ckpt = getattr(section, "checkpoint", None) if section is not None else None
     return Path(ckpt) if ckpt else None
 
@@ -241,7 +241,7 @@ def load_evaluation_target(target: Path, plugins: Any) -> EvalTarget:
 
             keys = resolved_stage_keys(resolved, plugins)
             for stage in ("imitator", "latent"):
-                section = getattr(resolved.spec, stage, None)
+                section = getattr(resolved.spec, stage)
                 if section is not None and section.trainer is not None and stage not in found:
                     partial = sorted((target.parent / "artifacts" / f"{stage}-{keys[stage]}").glob("*.pt"))
                     hint = f"; evaluate its latest training checkpoint instead: mocap eval {partial[0]}" if partial else "; run it first"

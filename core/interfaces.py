@@ -31,7 +31,7 @@ from torch import Tensor
 
 from mocap.roles import ActionSpace, Box, MotionSource, MultiDiscrete
 from mocap.skeleton import Skeleton
-from mocap.state import HumanoidState, MotionFrames, Observations, SimState, Trajectories
+from mocap.state import HumanoidState, MotionFrames, Observations, SimState, TargetState, Trajectories
 
 if TYPE_CHECKING:  # pragma: no cover
     from mocap.observations import SixD
@@ -261,6 +261,47 @@ class LatentSpace(torch.nn.Module, ABC):
         """Restore :meth:`task_state_dict`."""
 
 
+# ----------------------------------------------------------------- optional simulator capabilities
+# What a task or a trainer may ask of a simulator beyond :class:`Simulator`, declared so that a
+# simulator author sees the contract and the framework checks it with ``isinstance`` (never by
+# probing attribute names). ``mocap.testing.check_simulator`` exercises each one a simulator offers.
+@runtime_checkable
+class MovableTarget(Protocol):
+    """A target prop per env that a task places and reads (the ``strike`` task's box). ``has_target``
+    is False for a simulator of this kind built without the prop (its ``set_target`` then raises)."""
+
+    @property
+    def has_target(self) -> bool: ...
+
+    def set_target(self, env_ids: Tensor, pos: Tensor, rot: Tensor | None = None) -> None:
+        """Place the props of envs ``env_ids`` (K,) at ``pos`` (K, 3), ``rot`` (K, 4) wxyz (default
+        upright), at rest; part of those envs' reset state from then on."""
+        ...
+
+    def target_state(self) -> TargetState:
+        """Every env's prop: :class:`mocap.state.TargetState` (N rows)."""
+        ...
+
+
+@runtime_checkable
+class ExternalWrench(Protocol):
+    """External forces and torques held on the bodies (VMP's pushes)."""
+
+    def set_external_wrench(self, env_ids: Tensor, wrench: Tensor) -> None:
+        """Hold ``wrench`` (K, B, 6): force (N) then torque (N m), world frame, per skeleton body, on
+        envs ``env_ids`` (K,) until changed or the env is reset."""
+        ...
+
+
+@runtime_checkable
+class PerEnvModels(Protocol):
+    """Per-env physical models that may be edited between steps (VMP's mass and friction randomization)."""
+
+    def env_models(self) -> list[Any]:
+        """N models (MuJoCo ``MjModel``), one per env, independent of each other."""
+        ...
+
+
 @runtime_checkable
 class DistillableLatent(Protocol):
     """What the shared ``distill`` trainer needs from a latent space (PULSE, Hybrid-RVQ, ...).
@@ -426,12 +467,15 @@ __all__: Sequence[str] = (
     "ActionSpace",
     "Box",
     "DistillableLatent",
+    "ExternalWrench",
     "Imitator",
     "LatentSample",
     "LatentSpace",
     "Metric",
     "MotionSource",
+    "MovableTarget",
     "MultiDiscrete",
+    "PerEnvModels",
     "RLTrainable",
     "Simulator",
     "StageResult",

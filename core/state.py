@@ -86,6 +86,19 @@ class SimState(HumanoidState):
 
 
 @dataclass
+class TargetState:
+    """State of every env's target prop (the strike task's box; :class:`mocap.interfaces.MovableTarget`):
+    pos (N, 3), rot (N, 4) wxyz, lin_vel and ang_vel (N, 3) world frame, ``fallen`` (N,) bool (tilted
+    beyond the prop's fallen angle)."""
+
+    pos: Tensor
+    rot: Tensor
+    lin_vel: Tensor
+    ang_vel: Tensor
+    fallen: Tensor
+
+
+@dataclass
 class MotionFrames(HumanoidState):
     """Reference frames sampled from the motion library at given (clip, time) pairs.
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 import torch
 
@@ -24,6 +26,26 @@ def test_mujoco_simulator_keeps_the_contract(amp):
     finally:
         sim.close()
     assert "physics state round-trip" in report
+    assert "external wrench" in report and "per-env models" in report and "movable target" not in report  # built without the prop
+
+
+def test_a_simulator_built_with_the_strike_target_checks_its_movable_target(amp):
+    """Issue 60 item 4: the capabilities tasks use are declared (mocap.interfaces.MovableTarget, ...)
+    and exercised by check_simulator; a target that does not land where it was put is named."""
+    from mocap.interfaces import MovableTarget
+
+    component = get_plugins().get("simulator", "mujoco")
+    task = get_plugins().get("task", "strike").build(None, skeleton=amp, num_envs=4, device="cpu")
+    sim = component.build(component.validate_params(dict(task.sim_overrides)), skeleton=amp, num_envs=4, seed=0)
+    try:
+        assert isinstance(sim, MovableTarget) and sim.has_target
+        assert "movable target" in check_simulator(sim)
+        real = sim.target_state
+        sim.target_state = lambda: dataclasses.replace(real(), pos=real().pos + 1.0)  # type: ignore[method-assign]
+        with pytest.raises(ContractViolation, match="not where set_target put it"):
+            check_simulator(sim)
+    finally:
+        sim.close()
 
 
 BUILTIN_TASKS = ["generation", "hmd_tracking", "inbetween", "motion_tracking", "point_goal", "reach", "speed", "strike", "terrain", "vr_tracking"]

@@ -123,6 +123,12 @@ CAPABILITIES = {  # names of optional capabilities that must be called, never pr
     "policy",
     "observation",
     "data_parallel",
+    # the simulator capabilities tasks and trainers use (mocap.interfaces.MovableTarget, ExternalWrench, PerEnvModels)
+    "has_target",
+    "set_target",
+    "target_state",
+    "set_external_wrench",
+    "env_models",
 }
 
 
@@ -133,4 +139,7 @@ def test_the_framework_never_probes_for_a_declared_capability():
             if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in ("getattr", "hasattr"):
                 if len(node.args) >= 2 and isinstance(node.args[1], ast.Constant) and node.args[1].value in CAPABILITIES:
                     found.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.func.id}(..., {node.args[1].value!r})")
+                elif len(node.args) >= 2 and not isinstance(node.args[1], ast.Constant) and (node.func.id == "hasattr" or len(node.args) == 3):
+                    # a probe through a variable name (hasattr(sim, need), getattr(x, name, None)): the name is unknown here
+                    found.append(f"{path.relative_to(ROOT)}:{node.lineno} {ast.unparse(node)}")
     assert not found, "declare these on the interface instead of probing:\n" + "\n".join(found)

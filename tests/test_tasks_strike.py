@@ -36,9 +36,11 @@ from mocap_tasks.strike import (
 
 
 class FakeSim:
-    """The parts of the MuJoCo simulator the strike task uses: a box per env and ground-only contacts."""
+    """The parts of the MuJoCo simulator the strike task uses: a box per env (the declared
+    ``mocap.interfaces.MovableTarget`` capability) and ground-only contacts."""
 
     dt = 1.0 / 30.0
+    has_target = True
 
     def __init__(self, n: int, b: int):
         self.pos = torch.zeros(n, 3, dtype=F64)

@@ -77,6 +77,8 @@ evaluation methods in :mod:`mocap_phc.env_mining` (a base class of :class:`Imita
 
 from __future__ import annotations
 
+import dataclasses
+
 from dataclasses import replace
 
 from typing import TYPE_CHECKING, Any, Callable
@@ -543,8 +545,9 @@ _HUMANOID_FIELDS = HUMANOID_FIELDS
 
 def _assign_rows(dst: HumanoidState, ids: Tensor, src: HumanoidState) -> None:
     """``dst[ids] = src`` for every tensor field with rows."""
-    for name in (*_HUMANOID_FIELDS, "clip_ids", "times"):
-        d, s = getattr(dst, name, None), getattr(src, name, None)
+    shared = {f.name for f in dataclasses.fields(dst)} & {f.name for f in dataclasses.fields(src)}
+    for name in [n for n in (*_HUMANOID_FIELDS, "clip_ids", "times") if n in shared]:  # the fields both states have
+        d, s = getattr(dst, name), getattr(src, name)
         if isinstance(d, Tensor) and isinstance(s, Tensor) and d.dim() > 0 and d.numel():
             d[ids] = s.to(d)
 

@@ -16,7 +16,8 @@ Tags: [P] paper, [T1] Table 1, [T1?] Table 1 but illegible, [X] our choice (the 
   torque of random direction and magnitude ``U[0, torque_max]``, held (MuJoCo ``xfrc_applied``, world
   frame, at the body's centre of mass) for ``U[duration]`` seconds (at least one control step).
 
-The simulator must offer ``env_models()`` and ``set_external_wrench`` (the ``mujoco`` simulator does).
+The simulator must offer ``env_models()`` and ``set_external_wrench`` (the ``mocap.interfaces.PerEnvModels``
+and ``ExternalWrench`` capabilities; the ``mujoco`` simulator does).
 Randomized physical parameters are redrawn on reset, so an exact resume re-applies them from
 :meth:`DomainRandomizer.state_dict`.
 """
@@ -30,6 +31,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from mocap.interfaces import ExternalWrench, PerEnvModels
 from mocap_vmp.tracking_params import DomainRandomizationParams, Range
 
 __all__ = ["DomainRandomizationParams", "DomainRandomizer", "default_push_bodies"]
@@ -47,9 +49,12 @@ class DomainRandomizer:
     def __init__(self, params: DomainRandomizationParams, sim: Any, generator: torch.Generator):
         import mujoco
 
-        for need in ("env_models", "set_external_wrench"):
-            if not hasattr(sim, need):
-                raise TypeError(f"domain randomization needs a simulator with {need}() (the mujoco simulator)")
+        offered: object = sim  # checked as declared capabilities; ``sim`` stays the MuJoCo simulator it reads below
+        if not isinstance(offered, ExternalWrench) or not isinstance(offered, PerEnvModels):
+            raise TypeError(
+                "domain randomization needs a simulator with external wrenches and per-env models "
+                f"(mocap.interfaces.ExternalWrench and PerEnvModels: the mujoco simulator); {type(sim).__name__} has not both"
+            )
         self.params = p = params
         self.sim = sim
         self.gen = generator

@@ -6,7 +6,6 @@ and the :class:`TargetState` it returns."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Callable
 
 import mujoco
@@ -15,6 +14,7 @@ import torch
 from torch import Tensor
 
 from mocap.rotations import quat_apply, quat_normalize
+from mocap.state import TargetState
 from mocap_sim_mujoco.readout import _FULL
 from mocap_sim_mujoco.terrain import height_map
 
@@ -23,19 +23,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from mocap_sim_mujoco.mujoco_params import MujocoParams
     from mocap_sim_mujoco.terrain import Terrain
 
-__all__ = ["SimulatorExtras", "TargetState"]
-
-
-@dataclass
-class TargetState:
-    """State of the target prop of every env: pos (N, 3), rot (N, 4) wxyz, velocities (N, 3) world,
-    ``fallen`` (N,) bool (tilted beyond :attr:`TargetParams.fallen_angle`)."""
-
-    pos: Tensor
-    rot: Tensor
-    lin_vel: Tensor
-    ang_vel: Tensor
-    fallen: Tensor
+__all__ = ["SimulatorExtras"]
 
 
 class SimulatorExtras:
@@ -102,6 +90,11 @@ class SimulatorExtras:
         return data
 
     # ------------------------------------------------------------------------- props
+    @property
+    def has_target(self) -> bool:
+        """True when the simulator was built with a target prop (``params.target``)."""
+        return self.params.target is not None
+
     def _need_target(self) -> None:
         if self.params.target is None:
             raise RuntimeError("this simulator has no target prop (set params.target)")

@@ -102,7 +102,8 @@ from mocap.state import HumanoidState, SimState
 from mocap_sim_mujoco.actuators import ActuatorModel, explicit_stability_ratio, to_motor_actuators
 from mocap_sim_mujoco.mjcf import FLOOR_GEOM, ModelIndex, build_mjcf, model_index
 from mocap_sim_mujoco.mujoco_params import MujocoParams, TargetParams
-from mocap_sim_mujoco.props import SimulatorExtras, TargetState
+from mocap.state import TargetState
+from mocap_sim_mujoco.props import SimulatorExtras
 from mocap_sim_mujoco.readout import _CTRL, _FULL, _XFRC, StateReadout
 from mocap_sim_mujoco.terrain import Terrain, TerrainParams
 

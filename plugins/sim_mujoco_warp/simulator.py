@@ -65,12 +65,11 @@ from mocap.interfaces import Simulator
 from mocap.plugins import PluginError
 from mocap.rotations import quat_apply, quat_conjugate, quat_normalize
 from mocap.skeleton import Skeleton
-from mocap.state import HumanoidState, SimState
+from mocap.state import HumanoidState, SimState, TargetState
 from mocap_sim_mujoco.simulator import (
     TARGET_JOINT,
     MujocoParams,
     MujocoSimulator,
-    TargetState,
 )
 from mocap_sim_mujoco.terrain import height_map
 from mocap_sim_mujoco_warp.warp_params import MujocoWarpParams
@@ -431,6 +430,11 @@ class MujocoWarpSimulator(Simulator):
         return data
 
     # ------------------------------------------------------------------------- props
+    @property
+    def has_target(self) -> bool:
+        """True when the simulator was built with a target prop (``params.target``)."""
+        return self.params.target is not None
+
     def _need_target(self) -> None:
         if self.params.target is None:
             raise RuntimeError("this simulator has no target prop (set params.target)")

@@ -55,11 +55,11 @@ import math
 from typing import Any, Literal
 
 import torch
-from mocap.interfaces import Task
+from mocap.interfaces import MovableTarget, Task
 from mocap.observations import rotation_sixd, world_to_heading
 from mocap.rotations import heading_quat_inv, quat_mul
 from mocap.skeleton import Skeleton
-from mocap.state import SimState
+from mocap.state import SimState, TargetState
 from mocap_tasks.common import (
     TaskBase,
     horizontal_unit,
@@ -161,13 +161,19 @@ class StrikeTask(TaskBase, Task):
         }
 
     # -------------------------------------------------------------------------- simulator
-    def _need_sim(self) -> Any:
-        if self.sim is None:
+    def _need_sim(self) -> MovableTarget:
+        sim = self.sim
+        if sim is None:
             raise RuntimeError("the strike task needs the simulator: call attach(sim) with a simulator built with sim_overrides")
-        return self.sim
+        if not isinstance(sim, MovableTarget) or not sim.has_target:
+            raise RuntimeError(
+                f"the strike task needs a simulator with a target prop (mocap.interfaces.MovableTarget, built with the task's "
+                f"sim_overrides); {type(sim).__name__} has none"
+            )
+        return sim
 
-    def target_state(self) -> Any:
-        """The simulator's :class:`~mocap_sim_mujoco.simulator.TargetState` (pos, rot, lin_vel, ang_vel)."""
+    def target_state(self) -> TargetState:
+        """The simulator's :class:`mocap.state.TargetState` (pos, rot, lin_vel, ang_vel, fallen)."""
         return self._need_sim().target_state()
 
     def target_contact(self, state: SimState) -> Tensor:
