@@ -43,6 +43,51 @@ def fallen_down(body_pos: Tensor, body_contact: Tensor, allowed: Tensor, fall_he
     return (body_contact & ~allowed.to(body_contact.device) & below).any(-1)
 
 
+def pairwise_distances(traj: Tensor) -> Tensor:
+    """(N, N) mean over t and b of ‖traj[t, i, b] − traj[t, j, b]‖ for (T, N, B, 3) trajectories."""
+    T, N, B, _ = traj.shape
+    x = traj.permute(1, 0, 2, 3).reshape(N, T * B, 3)
+    out = torch.zeros(N, N, dtype=torch.float64)
+    for i in range(N - 1):
+        d = torch.linalg.vector_norm(x[i + 1 :] - x[i], dim=-1).mean(-1).double()
+        out[i, i + 1 :] = d
+        out[i + 1 :, i] = d
+    return out
+
+
+def generation_intervals(result: dict[str, Any], survival: list[float], distances: Tensor, resamples: int = 2000) -> dict[str, list[float]]:
+    """95% intervals over the rollouts (:mod:`mocap.intervals`): Wilson for the fall and down-at-end
+    shares and the filtered share (rollouts as the effective count: transitions within one are
+    correlated); bootstrap for the time to fall, the survival time and the diversity (rollouts
+    resampled, their pairwise distances averaged over distinct pairs); mean ± 1.96 std / √rollouts
+    for the match distance."""
+    import numpy as np
+
+    from mocap.intervals import bootstrap_mean, normal_mean, wilson
+
+    n = int(result["num_rollouts"])
+    found = {
+        "fall_rate": wilson(result["fall_rate"] * n, n),
+        "down_at_end": wilson(result["down_at_end"] * n, n),
+        "filtered": wilson(result["filtered"] * n, n),
+        "time_to_fall_s": bootstrap_mean([t for t in result["fall_time_s_per_rollout"] if t is not None]),
+        "survival_s": bootstrap_mean(survival),
+        "match_distance": normal_mean(result["match_distance"], result["match_distance_std"], n),
+    }
+    if n >= 2:
+        rng = np.random.default_rng(0)
+        dist = distances.numpy()
+        means = []
+        for _ in range(resamples):
+            idx = rng.integers(0, n, n)
+            sub = dist[np.ix_(idx, idx)]
+            distinct = idx[:, None] != idx[None, :]
+            means.append(float(sub[distinct].mean()) if distinct.any() else math.nan)
+        finite = [m for m in means if math.isfinite(m)]
+        found["diversity_m"] = (float(np.percentile(finite, 2.5)), float(np.percentile(finite, 97.5))) if finite else None
+    return {k: list(v) for k, v in found.items() if v is not None}
+
+
 def pairwise_diversity(traj: Tensor) -> float:
     """Mean over pairs i < j of mean_{t,b} ‖traj[t, i, b] − traj[t, j, b]‖ for (T, N, B, 3) trajectories."""
     T, N, B, _ = traj.shape
@@ -263,6 +308,7 @@ def evaluate_generation(
         "fall_time_s_per_rollout": per_rollout,
         "falls_by_start_clip": falls_by_start_clip(start_names, per_rollout, down.tolist()),
     }
+    result["ci95"] = generation_intervals(result, survival.tolist(), pairwise_distances(traj))
     if recorder is not None:
         for frames in frames_by_env:
             for pose in frames:

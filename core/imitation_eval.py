@@ -193,8 +193,31 @@ def evaluate_imitator(
         "horizon": "clip length" if p.horizon is None else f"looping clips: {p.horizon:g} s",
         "units": _units(metrics),
         "aggregate": aggregate,
+        "ci95": aggregate_intervals(aggregate, clips),
         "clips": clips,
     }
+
+
+def aggregate_intervals(aggregate: dict[str, Any], clips: dict[str, dict[str, Any]]) -> dict[str, list[float]]:
+    """95% intervals of the aggregate over the clips (:mod:`mocap.intervals`): the success rate's
+    Wilson interval over the clips, each mean metric's bootstrap interval over the clips it averages
+    (all clips; ``_succ``: the successful ones). A re-run elsewhere lands in these, not on the digits."""
+    from mocap.intervals import bootstrap_mean, wilson
+
+    out: dict[str, list[float]] = {}
+    rate = wilson(float(aggregate["succeeded"]), int(aggregate["total"]))
+    if rate is not None:
+        out["success_rate"] = list(rate)
+    rows = list(clips.values())
+    for key in aggregate:
+        base = key.removesuffix("_succ")
+        if key in ("success_rate", "succeeded", "total", "fps", "unstable_episodes") or not rows or base not in rows[0]:
+            continue
+        chosen = [r for r in rows if r["success"]] if key.endswith("_succ") else rows
+        interval = bootstrap_mean([float(r[base]) for r in chosen if isinstance(r.get(base), (int, float))])
+        if interval is not None:
+            out[key] = list(interval)
+    return out
 
 
 def record_video(imitator: Imitator, lib: MotionLibrary, make_sim: Callable[[int], Simulator], clip: str, seconds: float, path: Path) -> Path | None:

@@ -23,6 +23,8 @@ from typing import Any
 
 import numpy as np
 
+from mocap.intervals import bootstrap_mean
+
 Curve = tuple[np.ndarray, np.ndarray]  # (env_steps, values), increasing steps
 
 
@@ -82,13 +84,9 @@ def auc(curve: Curve, budget: float) -> float:
 
 
 def bootstrap_ci(values: list[float], resamples: int = 2000, seed: int = 0) -> tuple[float, float] | None:
-    """95% percentile bootstrap interval of the mean over ``values`` (None for fewer than two)."""
-    if len(values) < 2:
-        return None
-    rng = np.random.default_rng(seed)
-    data = np.asarray(values, dtype=np.float64)
-    means = data[rng.integers(0, len(data), size=(resamples, len(data)))].mean(1)
-    return float(np.percentile(means, 2.5)), float(np.percentile(means, 97.5))
+    """95% percentile bootstrap interval of the mean over ``values`` (None for fewer than two):
+    :func:`mocap.intervals.bootstrap_mean`."""
+    return bootstrap_mean(values, resamples, seed)
 
 
 def efficiency(curves: dict[str, list[Curve]], window: int = 5, fractions: tuple[float, ...] = (0.5, 0.8)) -> dict[str, Any]:

@@ -1,9 +1,18 @@
-"""Issue 23's "Done when": `mocap eval` and `mocap generate` of each canonical checkpoint reproduce the
-numbers its model card quotes, which are the committed ``eval.json`` / ``generation.json`` beside it.
+"""Issue 23's "Done when", as issue 63 words it: `mocap eval` and `mocap generate` of each canonical
+checkpoint reproduce the numbers its model card quotes (the committed ``eval.json`` /
+``generation.json`` beside it) **within their intervals**.
+
+Physics is chaotic: another CPU's float path gives other trajectories, so a re-run elsewhere lands near
+the committed numbers, not on their digits. Each committed file carries ``ci95``: the 95% interval of
+every aggregate over the clips (Wilson for the success rate, bootstrap for the mean errors) or the
+rollouts (Wilson for shares, bootstrap for times and diversity, mean ± 1.96 std / √rollouts for the match
+distance). The test passes when every fresh aggregate lies inside the committed interval and the
+protocol fields (clip set, counts, parameters, start clips) are the same; per-clip and per-rollout
+numbers (single episodes) are not compared. ``MOCAP_CARDS_EXACT=1`` also demands every digit: what the
+same machine and build give (bit-exact).
 
 Slow (about 80 s on 2 idle cores): it runs the CLI the card names, as a user would, into a temporary
-directory, and compares every number of the fresh JSON with the committed one. A retrained or edited
-checkpoint whose files were not regenerated fails here, naming up to 20 of the numbers that differ."""
+directory."""
 
 from __future__ import annotations
 
@@ -15,6 +24,8 @@ import sys
 from pathlib import Path
 
 import pytest
+
+from mocap.intervals import inside
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -60,6 +71,57 @@ def differences(fresh: object, committed: object, rel: float = 1e-4) -> list[str
     return sorted(out)
 
 
+#: fields that describe the protocol, not a measurement: equal on every machine
+PROTOCOL_FIELDS = ("protocol", "fps", "horizon", "units", "num_rollouts", "seconds", "params", "start_clips", "dataset_transitions", "generated_transitions")
+
+
+def outside(fresh: dict, committed: dict, where: str = "") -> list[str]:
+    """What of ``fresh`` does not reproduce ``committed`` within its intervals (module docstring)."""
+    out = []
+    for key in PROTOCOL_FIELDS:
+        if key in committed and fresh.get(key) != committed[key]:
+            out.append(f"{where}/{key}: {str(fresh.get(key))[:80]!r} now, {str(committed[key])[:80]!r} committed (protocol)")
+    if "clips" in committed and sorted(fresh.get("clips", {})) != sorted(committed["clips"]):
+        out.append(f"{where}/clips: another clip set")
+    values, old = fresh.get("aggregate", fresh), committed.get("aggregate", committed)
+    if "total" in old and values.get("total") != old["total"]:
+        out.append(f"{where}/aggregate/total: {values.get('total')} now, {old['total']} committed")
+    for key, interval in sorted(committed.get("ci95", {}).items()):
+        value = values.get(key)
+        if not isinstance(value, (int, float)) or not inside(float(value), interval):
+            out.append(f"{where}/{key}: {value!r} now, outside the committed 95% interval [{interval[0]:.6g}, {interval[1]:.6g}] (committed {old.get(key)!r})")
+    if "imitator" in committed and isinstance(committed["imitator"], dict):
+        out += outside(fresh.get("imitator") or {}, committed["imitator"], f"{where}/imitator")
+    return sorted(out)
+
+
+def test_outside_passes_a_rerun_inside_the_intervals_and_fails_one_outside():
+    committed = {
+        "protocol": "p",
+        "aggregate": {"success_rate": 14 / 15, "succeeded": 14, "total": 15, "mpjpe_g": 101.1},
+        "ci95": {"success_rate": [0.70, 0.99], "mpjpe_g": [81.0, 121.0]},
+        "clips": {"walk": {"mpjpe_g": 43.9}, "run": {"mpjpe_g": 50.0}},
+    }
+    drifted = {**committed, "aggregate": {**committed["aggregate"], "mpjpe_g": 100.2, "success_rate": 13 / 15, "succeeded": 13}}
+    drifted["clips"] = {"walk": {"mpjpe_g": 40.0}, "run": {"mpjpe_g": 61.0}}  # single episodes: not compared
+    assert outside(drifted, committed) == []
+    far = {**committed, "aggregate": {**committed["aggregate"], "mpjpe_g": 140.0}}
+    assert outside(far, committed) == ["/mpjpe_g: 140.0 now, outside the committed 95% interval [81, 121] (committed 101.1)"]
+    few = {**committed, "aggregate": {**committed["aggregate"], "success_rate": 9 / 15, "succeeded": 9}}
+    assert [line.split(":")[0] for line in outside(few, committed)] == ["/success_rate"]
+    assert outside({**committed, "protocol": "q"}, committed)[0].startswith("/protocol:")
+    assert outside({**committed, "clips": {"walk": {}}}, committed) == ["/clips: another clip set"]
+    lost = {k: v for k, v in committed.items() if k != "aggregate"}
+    assert len(outside(lost, committed)) == 3  # total, mpjpe_g and success_rate are gone
+
+
+def test_the_committed_cards_carry_intervals_around_their_own_numbers():
+    for _, _, committed in CARDS:
+        data = json.loads((ROOT / committed).read_text())
+        assert data.get("ci95"), committed
+        assert outside(data, data) == [], committed
+
+
 def test_differences_sees_a_changed_number_a_lost_key_and_ignores_paths():
     committed = {"aggregate": {"success": 0.9, "clips": [1, 2]}, "checkpoint": "/a/b", "fall_rate": 0.5}
     assert differences(committed, committed) == []
@@ -83,5 +145,9 @@ def test_a_canonical_checkpoint_reproduces_its_card(tmp_path: Path, command: str
         timeout=900,
     )
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
-    diff = differences(json.loads(out.read_text()), json.loads((ROOT / committed).read_text()))
-    assert not diff, f"{target}: `mocap {command}` no longer gives {committed}:\n" + "\n".join(diff[:20])
+    fresh, card = json.loads(out.read_text()), json.loads((ROOT / committed).read_text())
+    problems = outside(fresh, card)
+    assert not problems, f"{target}: `mocap {command}` lands outside {committed}'s intervals:\n" + "\n".join(problems[:20])
+    if os.environ.get("MOCAP_CARDS_EXACT") == "1":  # the same machine and build: every digit
+        diff = differences(fresh, card)
+        assert not diff, f"{target}: `mocap {command}` no longer gives {committed} bit-exactly:\n" + "\n".join(diff[:20])
