@@ -194,8 +194,14 @@ class StageContext:
             from mocap.task_env import make_task_env
 
             return make_task_env(self, num_envs)
-        if self.stage == "task":  # a task runs through a latent space (its factory takes num_envs, not a checkpoint)
-            raise StageFailed("the task stage needs a latent space (use `latent: {name: scratch}` for a policy without one)")
+        if self.stage == "task" and self.spec.task is not None:
+            import inspect
+
+            # a task factory (params, *, skeleton, num_envs, device) runs through a latent space; a task
+            # component built like a stage component (checkpoint, device) may be RLTrainable itself
+            factory = self.plugins.get("task", self.spec.task.name).resolved_factory()
+            if "num_envs" in inspect.signature(factory).parameters:
+                raise StageFailed("the task stage needs a latent space (use `latent: {name: scratch}` for a policy without one)")
         component = self.stage_component()
         if not isinstance(component, RLTrainable):
             raise StageFailed(f"{self.stage} {getattr(self.spec, self.stage).name!r} cannot be trained by RL (it is not RLTrainable: no make_env)")
