@@ -380,6 +380,8 @@ class Task(ABC):
     tracks_reference: bool = False
     #: simulator options the task needs (a target prop, a terrain), merged into the simulator's params
     sim_overrides: Mapping[str, Any] = MappingProxyType({})
+    #: the clips the task env draws start frames from (None: every clip of the motion set, with its weight)
+    start_clips: Sequence[str] | None = None
 
     def attach(self, sim: "Simulator") -> None:  # noqa: B027 - optional hook
         """Called once with the simulator the task runs in (props, ground contacts, terrain)."""

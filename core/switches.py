@@ -46,6 +46,9 @@ def _rows(model: type[BaseModel], prefix: str = "") -> list[tuple[str, str, str]
         desc = (field.description or "").replace("|", "\\|").replace("\n", " ")
         if TAGS.search(desc) or "paper" in desc.lower() or "official code" in desc.lower():
             rows.append((prefix + name, _default(model, name), desc))
+        nested = field.annotation
+        if isinstance(nested, type) and issubclass(nested, BaseModel):  # a nested section: its own switches, dotted
+            rows += _rows(nested, f"{prefix}{name}.")
     return rows
 
 

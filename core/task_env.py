@@ -192,7 +192,8 @@ class TaskEnv:
     def _reset_envs(self, ids: Tensor) -> None:
         from mocap.generation_eval import start_states
 
-        clip_ids, times = start_states(self.library, len(ids), self.skeleton, self.start_min_height, self._gen)
+        clips = list(self.task.start_clips) if self.task.start_clips is not None else None
+        clip_ids, times = start_states(self.library, len(ids), self.skeleton, self.start_min_height, self._gen, clips)
         if self._starts is not None:  # the task's own start frames (standing), moved onto the control grid
             st = self._starts
             times = grid_start_times(times.to(torch.float64), st.durations[clip_ids], st.loops[clip_ids], st.dt)

@@ -18,7 +18,7 @@ from mocap.hierarchy import ScratchParams
 from mocap.metric_display import MetricInfo
 from mocap.plugins import get_plugins
 from mocap.state import Observations
-from mocap.task_env import ScratchLatent, stateless_task_warning
+from mocap.task_env import ScratchLatent, TaskEnv, stateless_task_warning
 from mocap.task_eval import render_task_eval
 from mocap.testing import ContractViolation, check_latent_space, check_task, fake_sim_state
 
@@ -151,3 +151,47 @@ def test_a_factorys_own_type_error_is_not_hidden_behind_not_rl_trainable(tmp_pat
     with pytest.raises(TypeError, match="the author's own bug"):
         ctx.make_rl_env(2)
     log.close()
+
+
+@pytest.mark.parametrize("task_name", ["speed", "reach", "strike"])
+def test_the_official_codes_start_protocol_draws_run_frames_facing_x_or_at_the_origin(amp, task_name: str, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """Issue 65 item 1: ``start: {clips: [run], face_x: true}`` (speed) or ``{clips: [run], origin: true}``
+    (reach, strike) as PULSE's code starts its task commands; the default keeps today's starts."""
+    import mocap.generation_eval as generation_eval
+    from mocap.motion.library import MotionLibrary
+    from mocap.rotations import heading_angle
+    from mocap.state import MotionFrames
+
+    task_c = get_plugins().get("task", task_name)
+    start = {"clips": ["run"], "face_x": True} if task_name == "speed" else {"clips": ["run"], "origin": True}
+    task = task_c.build(task_c.validate_params({"start": start}), skeleton=amp, num_envs=6, device="cpu")
+    assert tuple(task.start_clips) == ("run",)
+    lib = MotionLibrary(get_plugins().get("motion_source", "deepmimic").build(None).load(amp), amp)
+    seen: list = []
+    real = generation_eval.start_states
+
+    def spy(lib, n, skeleton, min_height, generator, clips=None):  # type: ignore[no-untyped-def]
+        seen.append(clips)
+        return real(lib, n, skeleton, min_height, generator, clips)
+
+    monkeypatch.setattr(generation_eval, "start_states", spy)
+    sim_c = get_plugins().get("simulator", "mujoco")
+    sim = sim_c.build(sim_c.validate_params(dict(task.sim_overrides)), skeleton=amp, num_envs=6, seed=0)
+    env = TaskEnv(task, ScratchLatent(ScratchParams(), amp), lambda obs, out: out, lib, sim, seed=1)
+    try:
+        env.reset()  # the task env draws the start frames from the task's start clips
+    finally:
+        env.close()
+    assert seen == [["run"]]
+    ids, times = real(lib, 6, amp, 0.25, torch.Generator().manual_seed(0), ["run"])
+    assert set(ids.tolist()) == {lib.clip_index("run")}
+    frames = lib.frames(ids, times)
+    placed = task.start_state(torch.arange(6), frames)
+    assert isinstance(placed, MotionFrames) and torch.equal(placed.dof_pos, frames.dof_pos)
+    if task_name == "speed":
+        assert float(heading_angle(placed.root_rot).abs().max()) < 1e-5
+        assert torch.allclose(placed.root_pos, frames.root_pos, atol=1e-6)  # turned in place
+    else:
+        assert float(placed.root_pos[:, :2].abs().max()) < 1e-6 and torch.allclose(placed.root_pos[:, 2], frames.root_pos[:, 2])
+    default = task_c.build(None, skeleton=amp, num_envs=6, device="cpu")
+    assert default.start_clips is None and default.start_state(torch.arange(6), frames) is frames

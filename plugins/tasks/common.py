@@ -14,12 +14,13 @@ from typing import Any
 
 import torch
 from mocap.interfaces import Simulator
+from mocap.motion.transform import yaw_frames
 from mocap.rotations import heading_angle
 from mocap.skeleton import Skeleton
-from mocap.state import SimState
+from mocap.state import HumanoidState, MotionFrames, SimState
 from mocap.termination import allowed_contact_mask, fallen
 from torch import Tensor
-from mocap_tasks.task_params import FallParams
+from mocap_tasks.task_params import FallParams, StartParams
 
 __all__ = [
     "FallParams",
@@ -123,6 +124,7 @@ class TaskBase:
         num_envs: int,
         device: Any,
         seed: int,
+        start: StartParams | None = None,
     ) -> None:
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
@@ -139,6 +141,18 @@ class TaskBase:
         #: (N,) control steps since the env's last reset (advanced by :meth:`step`)
         self.progress = torch.zeros(self.num_envs, dtype=torch.long, device=self.device)
         self._sums = MetricSums()
+        self.start = start or StartParams()
+        #: the clips the env draws start frames from (Task.start_clips; None: every clip)
+        self.start_clips: Sequence[str] | None = tuple(self.start.clips) if self.start.clips else None
+
+    def start_state(self, env_ids: Tensor, frames: MotionFrames) -> HumanoidState:
+        """The sampled start frames turned to face +x and / or moved to the origin (:class:`StartParams`)."""
+        s = self.start
+        if not (s.face_x or s.origin):
+            return frames
+        yaw = -heading_angle(frames.root_rot) if s.face_x else torch.zeros(frames.root_pos.shape[0], dtype=frames.root_pos.dtype)
+        target = torch.zeros_like(frames.root_pos) if s.origin else frames.root_pos
+        return yaw_frames(frames, yaw, frames.root_pos, target)
 
     # -------------------------------------------------------------------------- sampling
     def _rand(self, *shape: int) -> Tensor:

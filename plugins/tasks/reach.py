@@ -109,6 +109,7 @@ class ReachTask(GoalBookkeeping, TaskBase, Task):
             num_envs,
             device,
             params.seed if seed is None else seed,
+            params.start,
         )
         self.sim_overrides = {}
         self.body_index = resolve_body(skeleton, params.body)

@@ -99,6 +99,7 @@ class SpeedTask(TaskBase, Task):
             num_envs,
             device,
             params.seed if seed is None else seed,
+            params.start,
         )
         self.sim_overrides = {}
         N, dev = self.num_envs, self.device

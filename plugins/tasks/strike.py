@@ -130,7 +130,7 @@ class StrikeTask(TaskBase, Task):
         seed: int | None = None,
     ):
         self.params = p = params
-        self._setup(p.termination, skeleton, num_envs, device, p.seed if seed is None else seed)
+        self._setup(p.termination, skeleton, num_envs, device, p.seed if seed is None else seed, p.start)
         self.max_reward = 2.0 if p.reward == "paper" else 1.0
         hx, hy, hz = p.half_size
         self.sim_overrides = {

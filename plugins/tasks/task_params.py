@@ -34,6 +34,26 @@ class FallParams(BaseModel):
     )
 
 
+class StartParams(BaseModel):
+    """Where an episode starts: the task protocol of the official PULSE code, or this project's
+    (issue 65). Defaults: today's starts (any frame of any clip of the motion set, as sampled)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    clips: list[str] | None = Field(
+        None,
+        min_length=1,
+        description="draw start frames from these clips only (default: every clip of the motion set, with its weight); "
+        "[CODE] starts the speed, reach and strike commands at a random frame of the run clip (PULSE "
+        "phc/data/cfg/env/env_pulse_amp.yaml:55, phc/env/tasks/humanoid_amp.py:358-367); [P] does not say",
+    )
+    face_x: bool = Field(
+        False,
+        description="turn each start about the vertical to face world +x ([CODE] speed: humanoid_speed.py turns the initial state to face +x)",
+    )
+    origin: bool = Field(False, description="move each start's root to x = y = 0 ([CODE] reach and strike move the root to the origin)")
+
+
 class SpeedParams(BaseModel):
     """Parameters of the ``speed`` task (module docstring)."""
 
@@ -76,6 +96,7 @@ class SpeedParams(BaseModel):
         ge=0.0,
         description="weight of the squared tangential speed ([CODE] tangent_err_w 0.1)",
     )
+    start: StartParams = Field(default_factory=StartParams, description="where episodes start (StartParams: clips, face_x, origin)")
     termination: FallParams = Field(default_factory=FallParams, description="fall termination")
 
     @model_validator(mode="after")
@@ -155,6 +176,7 @@ class ReachParams(BaseModel):
         gt=0.0,
         description="a goal counts as reached within this hand-target distance, m (metrics only; [DEFAULT], not in the papers)",
     )
+    start: StartParams = Field(default_factory=StartParams, description="where episodes start (StartParams: clips, face_x, origin)")
     termination: FallParams = Field(default_factory=FallParams, description="fall termination")
 
     @model_validator(mode="after")
@@ -250,6 +272,7 @@ class StrikeParams(BaseModel):
         "tan_norm",
         description="6-D rotation of the box orientation ([CODE] quat_to_tan_norm; [P] unspecified)",
     )
+    start: StartParams = Field(default_factory=StartParams, description="where episodes start (StartParams: clips, face_x, origin)")
     termination: FallParams = Field(
         default_factory=FallParams,
         description="fall termination (ground contacts only)",
