@@ -325,12 +325,14 @@ def embedded_humanoid_section(data: dict[str, Any]) -> Any:
     None without an embedded spec, or with one that does not parse)."""
     import yaml
 
+    from mocap import safe_yaml
+
     text = data.get("spec") if isinstance(data, dict) else None
     if not isinstance(text, str):
         return None
     try:
-        doc = yaml.safe_load(text)
-    except yaml.YAMLError:
+        doc = safe_yaml.load(text)
+    except (yaml.YAMLError, ValueError):
         return None
     return doc.get("humanoid") if isinstance(doc, dict) else None
 
