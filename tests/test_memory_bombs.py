@@ -123,3 +123,98 @@ def test_matrix_values_of_300_characters_give_short_distinct_cell_names(tmp_path
     assert names[2] == "description-short"
     for name in names:
         (tmp_path / name).mkdir()  # a valid folder name
+
+
+# ------------------------------------------------------------------ checkpoints (zip records, allocating globals)
+def _crafted_checkpoint(path: Path, obj: object, records: dict[str, bytes], *, deflate: bool = False) -> Path:
+    """A torch zip checkpoint whose pickle is ``obj`` written with :class:`_Storage` placeholders as
+    storages (persistent ids), and whose records are ``records`` (key -> bytes)."""
+    import io
+    import pickle
+    import zipfile
+
+    import torch
+
+    class Pickler(pickle.Pickler):
+        def persistent_id(self, obj):
+            return ("storage", torch.FloatStorage, obj.key, "cpu", obj.numel) if isinstance(obj, _Storage) else None
+
+    buffer = io.BytesIO()
+    Pickler(buffer, protocol=2).dump(obj)
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED if deflate else zipfile.ZIP_STORED) as archive:
+        archive.writestr("archive/data.pkl", buffer.getvalue())
+        archive.writestr("archive/byteorder", "little")
+        for key, raw in records.items():
+            archive.writestr(f"archive/data/{key}", raw)
+        archive.writestr("archive/version", "3\n")
+    return path
+
+
+class _Storage:
+    def __init__(self, numel: int, key: str = "0"):
+        self.numel, self.key = numel, key
+
+
+class _Tensor:
+    def __init__(self, storage: _Storage, size: tuple[int, ...]):
+        self.storage, self.size = storage, size
+
+    def __reduce__(self):
+        import collections
+
+        import torch
+
+        return (torch._utils._rebuild_tensor_v2, (self.storage, 0, self.size, (1,) * len(self.size), False, collections.OrderedDict()))
+
+
+class _Call:
+    def __init__(self, fn: object, args: tuple):
+        self.fn, self.args = fn, args
+
+    def __reduce__(self):
+        return (self.fn, self.args)
+
+
+def test_a_checkpoint_calling_bytearray_with_a_huge_size_is_refused_before_loading(tmp_path):
+    import torch
+
+    size = 300_000_000  # the fuzz campaign's was 4.5e9; smaller here, so that a regression costs a test run little
+    direct = _crafted_checkpoint(tmp_path / "direct.pt", {"x": _Call(bytearray, (size,))}, {})
+    through = _crafted_checkpoint(tmp_path / "through.pt", {"x": _Call(torch._tensor._rebuild_from_type_v2, (bytearray, torch.Tensor, (size,), {}))}, {})
+    for path in (direct, through):
+        assert path.stat().st_size < 1000
+        assert_one_line_error(invoke(["eval", path]), str(path), "refused", "builtins.bytearray")
+
+
+def test_a_checkpoint_whose_records_unpack_far_beyond_its_size_is_refused_before_torch_reads_it(tmp_path, monkeypatch):
+    import mocap.checkpoint
+    import mocap.pickle_scan
+
+    n = 4_000_000  # 16 MB of zeros, deflated to about 16 kB
+    path = _crafted_checkpoint(tmp_path / "bomb.pt", {"w": _Tensor(_Storage(n), (n,))}, {"0": bytes(4 * n)}, deflate=True)
+    monkeypatch.setattr(mocap.checkpoint, "UNPACK_SLACK", 2**20)  # the real slack is 256 MiB: the same refusal at a test's size
+    monkeypatch.setattr(mocap.checkpoint.torch, "load", None)  # torch must not read it
+    assert path.stat().st_size < 100_000
+    assert_one_line_error(invoke(["eval", path]), str(path), "refused: its records unpack to 16,000,", "archive/data/0 alone")
+    monkeypatch.setattr(mocap.pickle_scan, "MAX_PICKLE_BYTES", 100)
+    monkeypatch.setattr(mocap.checkpoint, "UNPACK_SLACK", 2**30)
+    assert_one_line_error(invoke(["eval", path]), str(path), "refused: its pickle archive/data.pkl is")
+
+
+@pytest.mark.parametrize("case", ["storage_beyond_record", "tensor_beyond_storage"])
+def test_a_checkpoint_that_rebuilds_a_tensor_beyond_its_record_is_one_error_line(tmp_path, case):
+    n = 1_200_000_000  # 4.8 GB of float32
+    storage = _Storage(n if case == "storage_beyond_record" else 1)
+    path = _crafted_checkpoint(tmp_path / "big.pt", {"w": _Tensor(storage, (n,))}, {"0": bytes(4)})
+    assert_one_line_error(invoke(["eval", path]), str(path))
+
+
+def test_committed_checkpoints_pass_the_archive_check():
+    from committed import committed_files
+
+    from mocap.checkpoint import _check_archive
+
+    paths = committed_files("checkpoints", "**/*.pt")
+    assert len(paths) > 20
+    for path in paths:
+        _check_archive(path)
