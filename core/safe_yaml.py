@@ -8,11 +8,12 @@ copy, an error message's ``repr``) expands it. :class:`BoundedLoader` therefore 
 composed node graph **with aliases expanded** before anything is built, and refuses a document of
 more than :data:`MAX_NODES` values, nested (aliases included) deeper than :data:`MAX_DEPTH` levels,
 or one that refers to itself (``&a [*a]``); it also refuses duplicate mapping keys (YAML would
-silently keep the last). This module imports no torch and no pydantic.
+silently keep the last) and strings holding a NUL character or a lone surrogate (``"\\ud83d"``). This module imports no torch and no pydantic.
 """
 
 from __future__ import annotations
 
+import re
 from typing import Any
 
 import yaml
@@ -35,6 +36,19 @@ class YamlLimitError(yaml.YAMLError):
 
     def __str__(self) -> str:
         return self.message if self.line is None else f"{self.message} (line {self.line})"
+
+
+#: characters no spec text holds: NUL (no path or name may contain it) and lone UTF-16 surrogates
+#: (``"\\ud83d"`` in YAML: no file can be written with one)
+_UNWRITABLE = re.compile("[\x00\ud800-\udfff]")
+
+
+def unwritable_char(text: str) -> str | None:
+    """``"a NUL character"`` or ``"a lone surrogate \\ud83d"`` when ``text`` holds one, else None."""
+    m = _UNWRITABLE.search(text)
+    if m is None:
+        return None
+    return "a NUL character" if m.group() == "\x00" else f"a lone surrogate \\u{ord(m.group()):04x}"
 
 
 def _children(node: yaml.Node) -> list[yaml.Node]:
@@ -79,6 +93,9 @@ def check_expanded_size(root: yaml.Node, max_nodes: int = MAX_NODES, max_depth: 
             continue
         if key in open_:
             raise YamlLimitError("an alias refers to a node that contains it (a recursive structure)", _line(node))
+        bad = unwritable_char(node.value) if isinstance(node, yaml.ScalarNode) and isinstance(node.value, str) else None
+        if bad is not None:
+            raise YamlLimitError(f"a string holds {bad}, which no file name or text file can hold", _line(node))
         open_.add(key)
         stack.append((node, True))
         stack.extend((kid, False) for kid in _children(node) if id(kid) not in done)
@@ -150,4 +167,4 @@ def load(text: str) -> Any:
     return yaml.load(text, Loader=BoundedLoader)  # noqa: S506 - a SafeLoader subclass
 
 
-__all__ = ["MAX_CHARS", "MAX_DEPTH", "MAX_NODES", "BoundedLoader", "YamlLimitError", "check_expanded_size", "count_values", "load"]
+__all__ = ["MAX_CHARS", "MAX_DEPTH", "MAX_NODES", "BoundedLoader", "YamlLimitError", "check_expanded_size", "count_values", "load", "unwritable_char"]

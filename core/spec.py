@@ -313,6 +313,9 @@ def parse_override(item: str) -> tuple[list[str], Any]:
         raise SpecError("--set", [SpecIssue("", f"the key {_fmt_value(key)} has {len(parts):,} parts; a field path has at most {MAX_SET_PARTS}")])
     if not parts or any(not p for p in parts):
         raise SpecError("--set", [SpecIssue("", f"bad key {key!r} (use dotted field names, e.g. latent.params.beta)")])
+    bad = safe_yaml.unwritable_char(item)
+    if bad is not None:  # a lone surrogate: an argument's undecodable byte
+        raise SpecError("--set", [SpecIssue("", f"{_fmt_value(item)} holds {bad}, which no file name or text file can hold")])
     value: Any = raw
     stripped = raw.strip()
     if stripped[:1] in ("[", "{") or stripped in ("null", "~"):
