@@ -289,3 +289,31 @@ def test_a_disk_full_before_the_run_starts_is_one_error_line(tmp_path, monkeypat
     out = tmp_path / "run"
     line = assert_one_line_error(invoke(["run", AMP_BUNDLED, "--out", out]), str(out / ".mocap-run.lock"), "the disk is full")
     assert "free some space" in line
+
+
+# ------------------------------------------------------------------ fuzz item 5: weights no trained policy holds
+@pytest.mark.parametrize(
+    "case, fragment",
+    [
+        ("nan", "holds NaN or infinite values"),
+        ("inf", "holds NaN or infinite values"),
+        ("bool", "holds torch.bool values, not real numbers"),
+        ("complex", "holds torch.complex64 values, not real numbers"),
+        ("negative_var", "normalizer variance 'obs_norm.var' is negative"),
+    ],
+)
+def test_a_policy_file_with_weights_no_trained_policy_holds_is_one_error_line(amp_policy, tmp_path, case, fragment):
+    import torch
+
+    data = torch.load(amp_policy, weights_only=True)
+    state = dict(data["state_dict"])
+    weight = next(k for k in state if k.endswith(".weight"))
+    if case == "negative_var":
+        state["obs_norm.var"] = -state["obs_norm.var"]
+    else:
+        value = {"nan": float("nan"), "inf": float("inf")}.get(case)
+        state[weight] = state[weight].clone().fill_(value) if value is not None else state[weight].to({"bool": torch.bool, "complex": torch.complex64}[case])
+    path = tmp_path / "policy.pt"
+    torch.save({**data, "state_dict": state}, path)
+    for command in (["eval", path], ["eval-noisy", path]):
+        assert_one_line_error(invoke(command), str(path), fragment)
