@@ -41,9 +41,9 @@ def read_run(run_dir: Path, offset: int = 0) -> dict:
         if "eval/success_rate" in r
     ]
     loss = [{"env_steps": shift(r.get("env_steps"), offset), "action": r.get("loss/action")} for r in rows if "loss/action" in r]
-    import yaml
+    from mocap.runfiles import read_spec_file
 
-    spec = yaml.safe_load((run_dir / "spec.yaml").read_text()) if (run_dir / "spec.yaml").is_file() else {}
+    spec = read_spec_file(run_dir / "spec.yaml") if (run_dir / "spec.yaml").is_file() else {}
     section = (spec or {}).get("latent") or {}
     latent = f"{section.get('name', '?')} ({(section.get('params') or {}).get('variant', '')})".replace(" ()", "")
     return {"run": run_dir.name, "latent": latent, "offset": offset, "evals": evals, "action_loss": loss[:: max(1, len(loss) // 200)]}

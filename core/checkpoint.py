@@ -153,6 +153,7 @@ def load_checkpoint(
         raise CheckpointError(f"{path}: a directory, not a checkpoint file")
     if not path.is_file():
         raise CheckpointError(f"{path}: no such checkpoint")
+    _check_archive(path)
     try:
         with warnings.catch_warnings():  # torch's "Detected pickle protocol 4" is no news to the user
             warnings.simplefilter("ignore", UserWarning)
@@ -184,6 +185,49 @@ def load_checkpoint(
     if expect is not None:
         check_format(path, data, expect, what=what)
     return data
+
+
+#: a checkpoint's records unpack to at most this many times the file's size plus :data:`UNPACK_SLACK`
+#: bytes (torch stores them uncompressed: a mocap checkpoint unpacks to its own size)
+UNPACK_FACTOR = 4
+UNPACK_SLACK = 256 * 2**20
+
+
+def _check_archive(path: Path) -> None:
+    """Refuse, before torch reads it, a zip checkpoint whose records unpack to far more than the file
+    holds (torch would inflate them in memory), whose pickle is larger than
+    :data:`mocap.pickle_scan.MAX_PICKLE_BYTES`, or whose pickle names a global that allocates what
+    its arguments ask (:data:`mocap.pickle_scan.ALLOCATING_GLOBALS`, e.g. ``builtins.bytearray``)."""
+    import zipfile
+
+    from mocap.pickle_scan import MAX_PICKLE_BYTES, allocating_global
+
+    size = path.stat().st_size
+    try:
+        with zipfile.ZipFile(path) as archive:
+            infos = archive.infolist()
+    except Exception:  # noqa: BLE001 - no zip (torch's legacy format) or a damaged one: torch.load says which
+        return
+    cap = UNPACK_FACTOR * size + UNPACK_SLACK
+    total = sum(info.file_size for info in infos)
+    if total > cap:
+        biggest = max(infos, key=lambda info: info.file_size)
+        raise CheckpointError(
+            f"{path}: refused: its records unpack to {total:,} bytes from a file of {size:,} ({biggest.filename[:100]} alone to "
+            f"{biggest.file_size:,}); a checkpoint unpacks to at most {UNPACK_FACTOR} times its size plus {UNPACK_SLACK // 2**20} MiB"
+        )
+    pickles = [info for info in infos if info.filename.endswith("data.pkl") and info.file_size > MAX_PICKLE_BYTES]
+    if pickles:
+        raise CheckpointError(
+            f"{path}: refused: its pickle {pickles[0].filename[:100]} is {pickles[0].file_size:,} bytes; a checkpoint's "
+            f"metadata is at most {MAX_PICKLE_BYTES:,} (the weights are records of their own)"
+        )
+    named = allocating_global(path)
+    if named is not None:
+        raise CheckpointError(
+            f"{path}: refused: the checkpoint names the global {named}, which allocates whatever size the file asks for; "
+            "a mocap checkpoint holds only plain tensors and data"
+        )
 
 
 def _refused_global(exc: BaseException) -> str | None:
@@ -325,12 +369,14 @@ def embedded_humanoid_section(data: dict[str, Any]) -> Any:
     None without an embedded spec, or with one that does not parse)."""
     import yaml
 
+    from mocap import safe_yaml
+
     text = data.get("spec") if isinstance(data, dict) else None
     if not isinstance(text, str):
         return None
     try:
-        doc = yaml.safe_load(text)
-    except yaml.YAMLError:
+        doc = safe_yaml.load(text)
+    except (yaml.YAMLError, ValueError):
         return None
     return doc.get("humanoid") if isinstance(doc, dict) else None
 

@@ -108,7 +108,13 @@ def relative_spec_text(spec_yaml: str, dest: Path, *, root_map: tuple[str, str] 
     """``spec_yaml`` with every stage's ``checkpoint:`` and its trainer's ``init_policy`` or ``init_latent``
     (the weights a continued run started from) relative to ``dest``. ``root_map`` = ``(old prefix, new prefix)``
     rewrites absolute paths of another machine (or checkout) first."""
-    doc = yaml.safe_load(spec_yaml)
+    from mocap import safe_yaml
+    from mocap.errors import UserError
+
+    try:
+        doc = safe_yaml.load(spec_yaml)
+    except (yaml.YAMLError, ValueError) as exc:
+        raise UserError(f"{dest}: the embedded spec to export is not valid YAML ({str(exc).splitlines()[0][:200]})") from None
     if not isinstance(doc, dict):
         return spec_yaml
 

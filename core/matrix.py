@@ -55,6 +55,7 @@ from pathlib import Path
 from typing import Any, TypedDict
 
 from mocap.metric_display import format_cell, mean_ci95, metric_label
+from mocap.safe_yaml import count_values
 from mocap.spec import SpecError, SpecIssue, _rebase_paths, apply_overrides, extends_hints, load_document, validate_document
 
 
@@ -87,6 +88,19 @@ def _safe(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.=-]+", "_", text).strip("_") or "x"
 
 
+#: the longest cell name (a folder name: at most 255 bytes, and a run dir's paths grow below it)
+MAX_CELL_NAME = 100
+
+
+def _short(name: str) -> str:
+    """``name`` itself, or, when longer than :data:`MAX_CELL_NAME`, its start and a hash of all of it."""
+    import hashlib
+
+    if len(name) <= MAX_CELL_NAME:
+        return name
+    return name[: MAX_CELL_NAME - 13] + "-" + hashlib.sha256(name.encode("utf-8", "surrogatepass")).hexdigest()[:12]
+
+
 def _set(doc: dict[str, Any], path: str, value: Any) -> dict[str, Any]:
     parts = path.split(".")
     node = doc
@@ -101,6 +115,8 @@ def _set(doc: dict[str, Any], path: str, value: Any) -> dict[str, Any]:
 
 #: most cells one comparison spec may expand to (each cell is a training run)
 MAX_CELLS = 1000
+#: most values (scalars, lists, mappings) of all the cells' documents together
+MAX_CELL_VALUES = 2_000_000
 
 
 def expand(doc: dict[str, Any], base_dir: Path, source: str = "<spec>") -> list[Cell]:
@@ -126,6 +142,12 @@ def expand(doc: dict[str, Any], base_dir: Path, source: str = "<spec>") -> list[
     if count > MAX_CELLS:
         sizes = " x ".join(str(len(v)) for _, v in axes)
         raise SpecError(source, [SpecIssue("matrix", f"{sizes} = {count:,} cells; a comparison runs at most {MAX_CELLS:,} (split it into several specs)")])
+    per_cell = count_values(doc, MAX_CELL_VALUES) + sum(max(count_values(v, MAX_CELL_VALUES) for v in values) for _, values in axes)
+    if count * per_cell > MAX_CELL_VALUES:
+        raise SpecError(
+            source,
+            [SpecIssue("matrix", f"{count:,} cells of up to {per_cell:,} values each exceed {MAX_CELL_VALUES:,} values in all (split it into several specs)")],
+        )
     cells = []
     for combo in itertools.product(*(values for _, values in axes)):
         cell_doc = copy.deepcopy(doc)
@@ -140,7 +162,8 @@ def expand(doc: dict[str, Any], base_dir: Path, source: str = "<spec>") -> list[
                     _set(cell_doc, q, v)
                 labels[path] = _label(value[0])
         _rebase_paths(cell_doc, base_dir)
-        name = "_".join(_safe(f"{_axis_name(path)}-{labels[path]}") for path, _ in axes)
+        labels = {path: _short(label) for path, label in labels.items()}
+        name = _short("_".join(_safe(f"{_axis_name(path)}-{labels[path]}") for path, _ in axes))
         cells.append(Cell(name, labels, cell_doc))
     names = [c.name for c in cells]
     if len(set(names)) != len(names):

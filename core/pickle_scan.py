@@ -79,10 +79,34 @@ def refused_global(path: Path) -> str | None:
     return None
 
 
+#: globals torch's restricted load accepts that allocate whatever size their arguments name (a
+#: pickle of 400 bytes calling ``bytearray(4_500_000_000)``; a quantized, nested, sparse or wrapper
+#: tensor built at a size of its own): a mocap checkpoint holds none of them
+ALLOCATING_GLOBALS = frozenset(
+    {
+        "builtins.bytearray",
+        "torch._utils._rebuild_qtensor",
+        "torch._utils._rebuild_nested_tensor",
+        "torch._utils._rebuild_sparse_tensor",
+        "torch._utils._rebuild_wrapper_subclass",
+    }
+)
+
+
+def allocating_global(path: Path) -> str | None:
+    """The first global of :data:`ALLOCATING_GLOBALS` the checkpoint at ``path`` names, or None."""
+    for name in pickled_globals(path):
+        if name.startswith("__builtin__."):  # the Python 2 name a protocol-2 pickle writes (torch reads it as builtins)
+            name = "builtins." + name[len("__builtin__.") :]
+        if name in ALLOCATING_GLOBALS:
+            return name
+    return None
+
+
 def convertible(name: str) -> bool:
     """Whether a refused global is one an older mocap checkpoint held (a NumPy array or scalar,
     a deque): :func:`mocap.checkpoint.convert_checkpoint` makes such a file safe."""
     return name.split(".")[0] in CONVERTIBLE_MODULES
 
 
-__all__ = ["MAX_PICKLE_BYTES", "convertible", "pickled_globals", "refused_global"]
+__all__ = ["ALLOCATING_GLOBALS", "MAX_PICKLE_BYTES", "allocating_global", "convertible", "pickled_globals", "refused_global"]

@@ -37,7 +37,7 @@ from pydantic import BaseModel
 from rich.console import Console
 
 from mocap import distributed as dist
-from mocap.errors import StageFailed  # noqa: F401  (defined there, re-exported)
+from mocap.errors import StageFailed, StorageError  # noqa: F401  (StageFailed: defined there, re-exported)
 from mocap.checkpoint import atomic_write_json, atomic_write_text, hardware, package_versions
 from mocap.interfaces import RLTrainable, StageResult, Trainer
 from mocap.plugins import PluginError, PluginSet
@@ -281,7 +281,10 @@ def run_pipeline(
         console = _quiet_console()
     run_lock: contextlib.AbstractContextManager[None] = contextlib.nullcontext()
     if main:
-        out_dir.mkdir(parents=True, exist_ok=True)
+        try:
+            out_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:  # a full disk, a read-only folder: one line naming it
+            raise StorageError(out_dir, exc) from exc
         run_lock = run_dir_lock(out_dir)
     with run_lock:
         return _run_pipeline_locked(resolved, plugins, out_dir, store, console, main)
@@ -296,10 +299,13 @@ def run_dir_lock(out_dir: Path) -> Iterator[None]:
     directory is refused at once (StageFailed naming the holder's pid) instead of interleaving its
     metrics and overwriting the spec. An OS lock (``flock``): a killed run releases it."""
     import fcntl
-    import os
 
     path = Path(out_dir) / RUN_LOCK
-    with path.open("a+") as fh:
+    try:
+        fh = path.open("a+")
+    except OSError as exc:  # a disk full before the run starts, a read-only folder
+        raise StorageError(path, exc) from exc
+    with fh:
         try:
             fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -309,13 +315,22 @@ def run_dir_lock(out_dir: Path) -> Iterator[None]:
                 f"{out_dir}: another mocap run (pid {holder}) is writing to this run directory; wait for it to finish, or choose another --out"
             ) from None
         try:
-            fh.seek(0)
-            fh.truncate()
-            fh.write(str(os.getpid()))
-            fh.flush()
+            try:
+                _write_pid(fh.fileno())
+            except OSError as exc:
+                raise StorageError(path, exc) from exc
             yield
         finally:
             fcntl.flock(fh, fcntl.LOCK_UN)
+
+
+def _write_pid(fd: int) -> None:
+    """Make the open lock file ``fd`` hold this process's pid (unbuffered: a full disk fails here,
+    not later when the file is closed). One function, so that tests can simulate a full disk."""
+    import os
+
+    os.ftruncate(fd, 0)
+    os.write(fd, str(os.getpid()).encode())
 
 
 def _preflight(resolved: ResolvedSpec, plugins: PluginSet, keys: dict[str, str], store: Path) -> None:

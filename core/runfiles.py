@@ -10,13 +10,17 @@ from typing import Any
 
 import yaml
 
+from mocap import safe_yaml
 from mocap.errors import UserError
 
 
-def yaml_mapping(text: str, source: str) -> dict[str, Any]:
-    """The mapping a spec text holds; :class:`UserError` naming ``source`` for bad YAML or another type."""
+def yaml_mapping(text: Any, source: str) -> dict[str, Any]:
+    """The mapping a spec text holds; :class:`UserError` naming ``source`` for bad YAML or another type
+    (``text`` too may be anything: a checkpoint's embedded spec is what the file says it is)."""
+    if not isinstance(text, str):
+        raise UserError(f"{source}: not a valid spec (a {type(text).__name__}, not YAML text)")
     try:
-        doc = yaml.safe_load(text)
+        doc = safe_yaml.load(text)
     except (yaml.YAMLError, RecursionError, ValueError) as exc:  # ValueError: e.g. an integer of 4,301 digits
         raise UserError(f"{source}: not a valid spec (YAML error: {str(exc).splitlines()[0][:200]})") from None
     if not isinstance(doc, dict):

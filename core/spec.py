@@ -28,6 +28,7 @@ from typing import Any, Iterator, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from mocap import safe_yaml
 from mocap.bounds import ThreadCount
 from mocap.plugins import PluginError, PluginSet, UnknownComponent, install_hint
 
@@ -176,48 +177,19 @@ def _issues_from_validation(exc: ValidationError, prefix: tuple[Any, ...] = (), 
 
 
 # -------------------------------------------------------------------------------- YAML + merge
-#: limits of a spec document (a spec is a few kB and a few levels deep)
-MAX_SPEC_BYTES = 1_000_000
-MAX_SPEC_DEPTH = 50
-
-
-class _SpecLoader(yaml.SafeLoader):
-    """``yaml.SafeLoader`` that refuses duplicate mapping keys (YAML would silently keep the last)
-    and nesting deeper than :data:`MAX_SPEC_DEPTH` (PyYAML recurses once per level)."""
-
-    _depth = 0
-
-    def compose_node(self, parent: Any, index: Any) -> Any:
-        self._depth += 1
-        try:
-            if self._depth > MAX_SPEC_DEPTH:
-                raise yaml.constructor.ConstructorError(None, None, f"nested more than {MAX_SPEC_DEPTH} levels deep", self.peek_event().start_mark)
-            return super().compose_node(parent, index)
-        finally:
-            self._depth -= 1
-
-    def construct_mapping(self, node: Any, deep: bool = False) -> Any:
-        if isinstance(node, yaml.MappingNode):
-            seen: set[Any] = set()
-            for key_node, _ in node.value:
-                if key_node.tag == "tag:yaml.org,2002:merge":  # `<<: *anchor`: merged keys may be overridden
-                    continue
-                key = self.construct_object(key_node, deep=True)  # type: ignore[no-untyped-call]
-                try:
-                    dup = key in seen
-                    seen.add(key)
-                except TypeError:  # an unhashable key: SafeLoader reports it
-                    continue
-                if dup:
-                    raise yaml.constructor.ConstructorError("while reading a mapping", node.start_mark, f"duplicate key {key!r}", key_node.start_mark)
-        return super().construct_mapping(node, deep=deep)
+#: limits of a spec document (a spec is a few kB and a few levels deep): see :mod:`mocap.safe_yaml`
+MAX_SPEC_BYTES = safe_yaml.MAX_CHARS
+MAX_SPEC_DEPTH = safe_yaml.MAX_DEPTH
+#: the longest ``extends:`` chain and ``--set`` key (a spec extends one or two files)
+MAX_EXTENDS_DEPTH = 64
+MAX_SET_PARTS = 64
 
 
 def _yaml_load(text: str, source: str) -> Any:
-    if len(text) > MAX_SPEC_BYTES:
-        raise SpecError(source, [SpecIssue("", f"the document is {len(text):,} characters; a spec is at most {MAX_SPEC_BYTES:,}")])
     try:
-        return yaml.load(text, Loader=_SpecLoader)  # noqa: S506 - a SafeLoader subclass
+        return safe_yaml.load(text)
+    except safe_yaml.YamlLimitError as exc:
+        raise SpecError(source, [SpecIssue("", exc.message, exc.line)]) from None
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         problem = exc.problem or exc.context or "invalid YAML"
@@ -283,6 +255,9 @@ def load_document(path: Path, _chain: tuple[Path, ...] = (), replaced: list[tupl
     if not found:
         raise SpecError(source, [SpecIssue("", "no such spec file")])
     resolved = path.resolve()
+    if len(_chain) >= MAX_EXTENDS_DEPTH:
+        chain = f"a chain of more than {MAX_EXTENDS_DEPTH} files extending one another (the last read: {source[:200]})"
+        raise SpecError(str(_chain[0]), [SpecIssue("extends", chain)])
     if resolved in _chain:
         cycle = " -> ".join(str(p) for p in (*_chain, resolved))
         raise SpecError(source, [SpecIssue("extends", f"circular extends: {cycle}")])
@@ -334,8 +309,13 @@ def parse_override(item: str) -> tuple[list[str], Any]:
         raise SpecError("--set", [SpecIssue("", f"expected KEY=VALUE, got {item!r}")])
     key, raw = item.split("=", 1)
     parts = [p for p in key.strip().split(".")]
+    if len(parts) > MAX_SET_PARTS:
+        raise SpecError("--set", [SpecIssue("", f"the key {_fmt_value(key)} has {len(parts):,} parts; a field path has at most {MAX_SET_PARTS}")])
     if not parts or any(not p for p in parts):
         raise SpecError("--set", [SpecIssue("", f"bad key {key!r} (use dotted field names, e.g. latent.params.beta)")])
+    bad = safe_yaml.unwritable_char(item)
+    if bad is not None:  # a lone surrogate: an argument's undecodable byte
+        raise SpecError("--set", [SpecIssue("", f"{_fmt_value(item)} holds {bad}, which no file name or text file can hold")])
     value: Any = raw
     stripped = raw.strip()
     if stripped[:1] in ("[", "{") or stripped in ("null", "~"):

@@ -227,3 +227,93 @@ def test_an_unfinished_checkpoint_with_nan_env_steps_is_still_described():
 
     assert training_status({"finished": False, "env_steps": float("nan"), "params": {"total_env_steps": 100}}) == "in progress"
     assert training_status({"finished": False, "step": float("inf")}) == "in progress"
+
+
+# ------------------------------------------------------------------ fuzz item 1, the rest: embedded specs, run folders, text, a full disk
+@pytest.mark.parametrize("spec", [{"a": 1}, 5], ids=["dict", "int"])
+def test_an_embedded_spec_that_is_no_text_is_one_error_line_in_every_command(amp_policy, tmp_path, spec):
+    import torch
+
+    path = tmp_path / "policy.pt"
+    torch.save({**torch.load(amp_policy, weights_only=True), "spec": spec}, path)
+    for command in (["eval", path], ["render", path, "--out", tmp_path / "x.mp4"], ["eval-noisy", path], ["recover", path]):
+        assert_one_line_error(invoke(command), str(path), "embedded spec", f"not a valid spec (a {type(spec).__name__}, not YAML text)")
+
+
+def test_a_config_that_is_text_is_one_error_line_in_every_command(amp_policy, tmp_path):
+    import torch
+
+    path = tmp_path / "policy.pt"
+    torch.save({**torch.load(amp_policy, weights_only=True), "config": "hello"}, path)
+    for command in (["render", path, "--out", tmp_path / "x.mp4"], ["eval-noisy", path], ["recover", path]):
+        assert_one_line_error(invoke(command), str(path), "the policy's config is a str")
+
+
+def test_a_run_folder_whose_stages_name_no_known_stage_is_one_error_line(tmp_path):
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "spec.yaml").write_text(AMP_BUNDLED.read_text().replace("extends:", "#"))
+    (run / "stages.json").write_text('[{"stage": "x"}]')
+    assert_one_line_error(invoke(["eval", run]), str(run))
+
+
+@pytest.mark.parametrize(
+    "text, fragment",
+    [
+        ('imitator:\n  checkpoint: "a\\0b.pt"\n', "a NUL character"),
+        ('description: "\\ud83d"\n', "a lone surrogate \\ud83d"),
+        ('imitator:\n  checkpoint: "\\udcff.pt"\n', "a lone surrogate \\udcff"),
+    ],
+)
+def test_a_spec_string_no_file_can_hold_is_one_error_line(tmp_path, text, fragment):
+    spec = tmp_path / "odd.yaml"
+    spec.write_text(f"spec_version: 1\nextends: {AMP_BUNDLED}\n{text}")
+    for command in (["validate", spec], ["run", spec, "--out", tmp_path / "run"]):
+        assert_one_line_error(invoke(command), str(spec), fragment)
+    assert not (tmp_path / "run").exists()
+
+
+def test_a_set_value_with_an_undecodable_byte_is_one_error_line():
+    assert_one_line_error(invoke(["validate", AMP_BUNDLED, "--set", "description=caf\udce9"]), "--set", "a lone surrogate \\udce9")
+
+
+def test_a_disk_full_before_the_run_starts_is_one_error_line(tmp_path, monkeypatch):
+    import errno
+
+    import mocap.pipeline
+
+    def full(fd: int) -> None:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(mocap.pipeline, "_write_pid", full)
+    out = tmp_path / "run"
+    line = assert_one_line_error(invoke(["run", AMP_BUNDLED, "--out", out]), str(out / ".mocap-run.lock"), "the disk is full")
+    assert "free some space" in line
+
+
+# ------------------------------------------------------------------ fuzz item 5: weights no trained policy holds
+@pytest.mark.parametrize(
+    "case, fragment",
+    [
+        ("nan", "holds NaN or infinite values"),
+        ("inf", "holds NaN or infinite values"),
+        ("bool", "holds torch.bool values, not real numbers"),
+        ("complex", "holds torch.complex64 values, not real numbers"),
+        ("negative_var", "normalizer variance 'obs_norm.var' is negative"),
+    ],
+)
+def test_a_policy_file_with_weights_no_trained_policy_holds_is_one_error_line(amp_policy, tmp_path, case, fragment):
+    import torch
+
+    data = torch.load(amp_policy, weights_only=True)
+    state = dict(data["state_dict"])
+    weight = next(k for k in state if k.endswith(".weight"))
+    if case == "negative_var":
+        state["obs_norm.var"] = -state["obs_norm.var"]
+    else:
+        value = {"nan": float("nan"), "inf": float("inf")}.get(case)
+        state[weight] = state[weight].clone().fill_(value) if value is not None else state[weight].to({"bool": torch.bool, "complex": torch.complex64}[case])
+    path = tmp_path / "policy.pt"
+    torch.save({**data, "state_dict": state}, path)
+    for command in (["eval", path], ["eval-noisy", path]):
+        assert_one_line_error(invoke(command), str(path), fragment)

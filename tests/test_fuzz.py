@@ -138,3 +138,207 @@ def test_damaged_checkpoints_load_or_fail_cleanly(data, tmp_path):
     except CheckpointError:
         return
     assert isinstance(out, dict)
+
+
+# ------------------------------------------------------------------ issue 63: checkpoints, motion files and CLI options
+#: outcomes per family (exit code or "clip" / "refused"), printed at the end of the module (``-s``)
+OUTCOMES: dict[str, dict[Any, int]] = {}
+
+
+def _tally(family: str, outcome: Any) -> None:
+    counts = OUTCOMES.setdefault(family, {})
+    counts[outcome] = counts.get(outcome, 0) + 1
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _report_outcomes():
+    yield
+    for family, counts in sorted(OUTCOMES.items()):
+        print(f"\nfuzz {family}: {sum(counts.values())} examples, outcomes {dict(sorted(counts.items(), key=str))}")
+
+
+class _Reached(Exception):
+    """Raised by the stubbed evaluation: every check before it passed."""
+
+
+@pytest.fixture(scope="module")
+def amp_policy_file(tmp_path_factory) -> Path:
+    from test_bad_input import _amp_policy
+
+    return _amp_policy(tmp_path_factory.mktemp("fuzz_policy") / "policy.pt")
+
+
+def _stub_evaluation(monkeypatch: Any) -> None:
+    """``mocap eval`` stops where the rollouts would start (a user error, exit 2, with a known text)."""
+    import mocap.imitation_eval
+    from mocap.errors import UserError
+
+    def reached(*args: Any, **kwargs: Any) -> None:
+        raise UserError("fuzz: reached the evaluation")
+
+    monkeypatch.setattr(mocap.imitation_eval, "evaluate_imitator", reached)
+
+
+def _run_cleanly(argv: list[str], capsys: Any, family: str) -> None:
+    rc = main([str(a) for a in argv])
+    err = capsys.readouterr().err
+    assert rc in (0, 2), err
+    assert "Traceback" not in err
+    _tally(family, "evaluated" if "fuzz: reached the evaluation" in err else rc)
+
+
+def _nasty_tensor(data: st.DataObject, like: Any) -> Any:
+    import torch
+
+    kind = data.draw(st.sampled_from(["nan", "inf", "huge", "bool", "complex", "int", "shape", "empty", "negative"]), label="tensor")
+    if kind == "bool":
+        return like.to(torch.bool)
+    if kind == "complex":
+        return like.to(torch.complex64)
+    if kind == "int":
+        return like.to(torch.int64)
+    if kind == "shape":
+        return torch.zeros(data.draw(st.integers(0, 5)), data.draw(st.integers(1, 5)))
+    if kind == "empty":
+        return torch.zeros(0)
+    value = {"nan": float("nan"), "inf": float("inf"), "huge": 1e38, "negative": -1.0}[kind]
+    return like.clone().fill_(value)
+
+
+def _mutated_policy(data: st.DataObject, source: Path, tmp_path: Path) -> Path:
+    import torch
+
+    policy = torch.load(source, weights_only=True)
+    where = data.draw(st.sampled_from(["top", "config", "state_dict", "space"]), label="where")
+    if where == "top":
+        key = data.draw(st.sampled_from([*policy, "unknown"]), label="key")
+        if data.draw(st.booleans(), label="delete"):
+            policy.pop(key, None)
+        else:
+            policy[key] = data.draw(st.sampled_from(NASTY), label="value")
+    elif where == "config":
+        config = dict(policy["config"])
+        config[data.draw(st.sampled_from([*config, "unknown"]), label="key")] = data.draw(st.sampled_from(NASTY), label="value")
+        policy["config"] = config
+    elif where == "space":
+        space = dict(policy["config"]["action_space"])
+        space[data.draw(st.sampled_from([*space, "unknown"]), label="key")] = data.draw(st.sampled_from(NASTY), label="value")
+        policy["config"] = {**policy["config"], "action_space": space}
+    else:
+        state = dict(policy["state_dict"])
+        key = data.draw(st.sampled_from(sorted(k for k, v in state.items() if isinstance(v, torch.Tensor))), label="key")
+        state[key] = _nasty_tensor(data, state[key])
+        policy["state_dict"] = state
+    path = tmp_path / "policy.pt"
+    torch.save(policy, path)
+    return path
+
+
+@pytest.mark.slow
+@LONG
+@given(data=st.data())
+def test_mutated_policy_files_evaluate_or_fail_cleanly(data, tmp_path, capsys, monkeypatch, amp_policy_file):
+    _stub_evaluation(monkeypatch)
+    _run_cleanly(["eval", _mutated_policy(data, amp_policy_file, tmp_path), "--num-envs", "2"], capsys, "policy files")
+
+
+def _amass_file(data: st.DataObject, tmp_path: Path) -> Path:
+    import numpy as np
+
+    frames = data.draw(st.sampled_from([0, 1, 2, 8]), label="frames")
+    arrays: dict[str, Any] = {"poses": np.zeros((frames, 72)), "trans": np.zeros((frames, 3)), "mocap_framerate": np.array(120.0), "betas": np.zeros(16)}
+    key = data.draw(st.sampled_from([*arrays, "mocap_frame_rate"]), label="array")
+    kind = data.draw(st.sampled_from(["value", "dtype", "shape", "delete"]), label="kind")
+    if kind == "delete":
+        arrays.pop(key, None)
+    elif kind == "dtype":
+        dtype = data.draw(st.sampled_from(["float32", "int64", "bool", "complex128", "U3", "uint8"]), label="dtype")
+        arrays[key] = np.asarray(arrays.get(key, np.array(120.0))).astype(dtype)
+    elif kind == "shape":
+        arrays[key] = np.zeros(tuple(data.draw(st.lists(st.integers(0, 80), max_size=3), label="shape")))
+    else:
+        value = data.draw(st.sampled_from([float("nan"), float("inf"), 1e300, -1e300, 1e-300, 0.0, 1e12, -5.0]), label="value")
+        arrays[key] = np.full(np.shape(arrays.get(key, np.array(0.0))), value)
+    path = tmp_path / "clip.npz"
+    (np.savez_compressed if data.draw(st.booleans(), label="compressed") else np.savez)(path, **arrays)
+    if data.draw(st.booleans(), label="damaged"):
+        path.write_bytes(_damaged(data, path.read_bytes()))
+    return path
+
+
+def _deepmimic_file(data: st.DataObject, tmp_path: Path) -> Path:
+    import json
+
+    from mocap.motion.deepmimic import default_data_dir
+
+    doc = json.loads((Path(default_data_dir()) / "humanoid3d_walk.txt").read_text())
+    value = data.draw(st.sampled_from([*NASTY, "0.0333", 1e-12, 1e12, 1e300, float("inf")]), label="value")
+    where = data.draw(st.sampled_from(["cell", "column", "frames", "loop", "row"]), label="where")
+    frames = doc["Frames"]
+    if where == "cell":
+        frames[data.draw(st.integers(0, len(frames) - 1))][data.draw(st.integers(0, 43))] = value
+    elif where == "column":
+        col = data.draw(st.integers(0, 43), label="column")
+        for row in frames:
+            row[col] = value
+    elif where == "frames":
+        doc["Frames"] = value
+    elif where == "loop":
+        doc["Loop"] = value
+    else:
+        frames[data.draw(st.integers(0, len(frames) - 1))] = value
+    path = tmp_path / "humanoid3d_fuzz.txt"
+    path.write_text(json.dumps(doc, allow_nan=True))
+    return path
+
+
+def _load_motion_cleanly(data: st.DataObject, tmp_path: Path, amp: Any, smpl: Any) -> None:
+    from mocap.motion.amass import load_amass_file
+    from mocap.motion.clip import MotionDataError
+    from mocap.motion.deepmimic import load_deepmimic_file
+
+    amass = data.draw(st.booleans(), label="amass")
+    try:
+        clip = load_amass_file(_amass_file(data, tmp_path), smpl) if amass else load_deepmimic_file(_deepmimic_file(data, tmp_path), amp)
+    except MotionDataError:
+        _tally("motion files", "refused")
+        return
+    _tally("motion files", "clip")
+    assert clip.num_frames >= 2
+
+
+@QUICK
+@given(data=st.data())
+def test_odd_motion_files_load_or_fail_cleanly(data, tmp_path, amp, smpl):
+    _load_motion_cleanly(data, tmp_path, amp, smpl)
+
+
+@pytest.mark.slow
+@LONG
+@given(data=st.data())
+def test_odd_motion_files_long(data, tmp_path, amp, smpl):
+    _load_motion_cleanly(data, tmp_path, amp, smpl)
+
+
+OPTION_VALUES = ["0", "-3", "1", "nan", "inf", "-inf", "1e308", "", "x" * 300, "../..", "/dev/full", "/proc/x.json", "a,b", "walk,runn", "\udcff"]
+
+
+@pytest.mark.slow
+@LONG
+@given(data=st.data())
+def test_cli_options_run_or_fail_cleanly(data, tmp_path, capsys, monkeypatch, amp_policy_file):
+    _stub_evaluation(monkeypatch)
+    value = data.draw(st.sampled_from(OPTION_VALUES), label="value")
+    command = data.draw(st.sampled_from(["eval", "validate", "motions"]), label="command")
+    if command == "eval":
+        option = data.draw(st.sampled_from(["--num-envs", "--loop", "--json", "--video", "--motions"]), label="option")
+        argv = ["eval", amp_policy_file, option, value if option != "--json" else tmp_path / value if value and "/" not in value else value]
+    elif command == "validate":
+        spec = data.draw(st.sampled_from(SPECS), label="spec")
+        keys = ["seed", "name", "imitator.trainer.params.horizon", "simulator.params.num_envs", "a." * 70 + "b", "motions.params.clips"]
+        key = data.draw(st.sampled_from(keys), label="key")
+        argv = ["validate", spec, "--set", f"{key}={value}"]
+    else:
+        option = data.draw(st.sampled_from(["--source", "--clip", "--path", "--humanoid"]), label="option")
+        argv = ["motions", "list", option, value]
+    _run_cleanly(argv, capsys, "cli options")

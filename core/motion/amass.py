@@ -37,7 +37,18 @@ from pydantic import ConfigDict, Field
 
 from mocap.motion.clip import Clip, MotionDataError
 from mocap.motion.deepmimic import y_up_to_z_up_pos
-from mocap.motion.sources import MotionSet, ReferenceVelocityParams, check_finite, expand_paths, load_each, resample
+from mocap.motion.sources import (
+    MAX_POSITION,
+    MotionSet,
+    ReferenceVelocityParams,
+    check_finite,
+    check_frame_count,
+    check_magnitude,
+    check_npz,
+    expand_paths,
+    load_each,
+    resample,
+)
 from mocap.roles import MotionSource
 from mocap.skeleton import Skeleton
 
@@ -90,9 +101,15 @@ def body_map(skeleton: Skeleton, where: str = "amass") -> list[int]:
     return [index[_key(n)] for n in SMPL_JOINT_NAMES]
 
 
-def _read(path: Path) -> tuple[np.ndarray, np.ndarray, float]:
+#: the arrays of an AMASS file that hold real numbers (checked before loading), and those with one row per frame
+_REAL = ("poses", "trans", "betas", "mocap_framerate", "mocap_frame_rate")
+_TIMED = ("poses", "trans")
+
+
+def _read(path: Path) -> tuple[np.ndarray, np.ndarray, float, np.ndarray | None]:
     if not path.is_file():
         raise MotionDataError(f"{path}: no such file")
+    check_npz(path, _REAL, _TIMED)
     try:
         with np.load(path, allow_pickle=False) as data:
             keys = set(data.files)
@@ -103,15 +120,18 @@ def _read(path: Path) -> tuple[np.ndarray, np.ndarray, float]:
             poses = np.array(data["poses"], dtype=np.float64)
             trans = np.array(data["trans"], dtype=np.float64)
             rate = float(data[rate_key])
+            betas = np.array(data["betas"], dtype=np.float64).reshape(1, -1) if "betas" in keys else None
     except MotionDataError:
         raise
     except Exception as exc:  # zipfile.BadZipFile, EOFError, zlib.error, ValueError, ...
         raise MotionDataError(f"{path}: unreadable or truncated npz file ({type(exc).__name__}: {exc})") from None
-    return poses, trans, rate
+    return poses, trans, rate, betas
 
 
 #: plausible capture rates, Hz (AMASS: 60-250; a rate of 1e-9 would ask for terabytes when resampled)
 MIN_RATE, MAX_RATE = 1.0, 10_000.0
+#: the longest rotation vector, rad, and the largest shape coefficient (SMPL's betas lie within a few units)
+MAX_ROTVEC, MAX_BETA = 1_000.0, 100.0
 
 
 def load_amass_file(
@@ -124,7 +144,7 @@ def load_amass_file(
     """Read one AMASS ``.npz`` file and convert it to a :class:`Clip` on ``skeleton`` (see the module doc)."""
     path = Path(path)
     index = body_map(skeleton, str(path))
-    poses, trans, rate = _read(path)
+    poses, trans, rate, betas = _read(path)
     if poses.ndim != 2 or poses.shape[1] < 3 * NUM_BODY_JOINTS or poses.shape[1] % 3:
         raise MotionDataError(f"{path}: poses has shape {poses.shape}, expected (T, 72), (T, 156) or (T, 165)")
     T = poses.shape[0]
@@ -136,6 +156,11 @@ def load_amass_file(
         raise MotionDataError(f"{path}: mocap_framerate must be between {MIN_RATE:g} and {MAX_RATE:g} Hz, got {rate}")
     check_finite(path, "poses", poses)
     check_finite(path, "trans", trans)
+    check_magnitude(path, "poses", poses, MAX_ROTVEC, " rad")
+    check_magnitude(path, "trans", trans, MAX_POSITION, " m")
+    if betas is not None and betas.size:
+        check_finite(path, "betas", betas)
+        check_magnitude(path, "betas", betas, MAX_BETA)
     if T < 2:
         raise MotionDataError(f"{path}: clip has {T} frame; at least 2 are needed")
 
@@ -162,6 +187,7 @@ def load_amass_file(
     if fps is not None and abs(fps - rate) > 1e-9 * rate:
         src_t = np.arange(T) / rate
         n = int(np.floor(src_t[-1] * fps + 1e-6)) + 1
+        check_frame_count(path, n, f"clip resampled to {fps:g} fps")
         if n < 2:
             raise MotionDataError(f"{path}: clip lasts {src_t[-1]:.3g} s, too short for one frame interval at {fps} fps")
         root_pos, root_rot, joint_rot = resample(src_t, root_pos, root_rot, joint_rot, np.arange(n) / fps)

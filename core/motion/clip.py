@@ -43,6 +43,53 @@ class MotionDataError(ValueError):
     """A motion file or clip is unusable; the message names the file and the problem."""
 
 
+#: the most frames of one clip, as read or after resampling (an hour at 60 fps; AMASS's longest
+#: sequences have tens of thousands of frames at 120 Hz): a clip costs about 5 kB of memory per frame
+MAX_FRAMES = 250_000
+#: the most bytes one member of a motion ``.npz`` may unpack to (SMPL-X poses of MAX_FRAMES frames: 330 MB)
+MAX_MEMBER_BYTES = 512 * 2**20
+
+
+def check_frame_count(path: Path | str, frames: int, what: str = "clip") -> None:
+    """Raise :class:`MotionDataError` when a clip would have more than :data:`MAX_FRAMES` frames."""
+    if frames > MAX_FRAMES:
+        raise MotionDataError(f"{path}: {what} has {frames:,} frames; a clip has at most {MAX_FRAMES:,} (split it into several files)")
+
+
+def check_npz(path: Path, real: tuple[str, ...], timed: tuple[str, ...]) -> None:
+    """Refuse, before numpy loads anything, an npz whose members unpack to more than
+    :data:`MAX_MEMBER_BYTES`, whose ``timed`` arrays have more than :data:`MAX_FRAMES` rows, or
+    whose ``real`` arrays hold anything but real numbers (bool, complex, text, objects): read from
+    the zip's directory and each ``.npy`` header."""
+    import zipfile
+
+    try:
+        archive = zipfile.ZipFile(path)
+    except Exception:  # noqa: BLE001 - no zip or a damaged one: np.load says which
+        return
+    with archive:
+        infos = {info.filename: info for info in archive.infolist()}
+        for info in infos.values():
+            if info.file_size > MAX_MEMBER_BYTES:
+                raise MotionDataError(
+                    f"{path}: {info.filename[:100]} unpacks to {info.file_size:,} bytes; a motion file's member is at most {MAX_MEMBER_BYTES:,}"
+                )
+        for key in dict.fromkeys((*real, *timed)):
+            if f"{key}.npy" not in infos:
+                continue
+            try:
+                with archive.open(f"{key}.npy") as fh:
+                    version = np.lib.format.read_magic(fh)
+                    read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+                    shape, _, dtype = read(fh)
+            except Exception as exc:  # noqa: BLE001 - a damaged header: ValueError, zlib.error, EOFError, ...
+                raise MotionDataError(f"{path}: {key} is not a readable array ({type(exc).__name__}: {str(exc)[:200]})") from None
+            if key in real and dtype.kind not in "fiu":
+                raise MotionDataError(f"{path}: {key} holds {dtype} values; expected real numbers")
+            if key in timed and len(shape) >= 1:
+                check_frame_count(path, int(shape[0]), key)
+
+
 @dataclass
 class Clip:
     """One motion clip on a named skeleton (see the module docstring for the fields)."""
@@ -114,6 +161,8 @@ class Clip:
         path = Path(path)
         if not path.is_file():
             raise MotionDataError(f"{path}: no such file")
+        arrays = ("root_pos", "root_rot", "joint_rot")
+        check_npz(path, (*arrays, "fps"), arrays)
         try:
             with np.load(path, allow_pickle=False) as data:
                 keys = set(data.files)

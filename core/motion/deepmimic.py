@@ -35,7 +35,16 @@ import numpy as np
 from pydantic import ConfigDict, Field, model_validator
 
 from mocap.motion.clip import Clip, MotionDataError
-from mocap.motion.sources import MotionSet, ReferenceVelocityParams, check_finite, load_each, resample
+from mocap.motion.sources import (
+    MAX_POSITION,
+    MotionSet,
+    ReferenceVelocityParams,
+    check_finite,
+    check_frame_count,
+    check_magnitude,
+    load_each,
+    resample,
+)
 from mocap.roles import MotionSource
 from mocap.skeleton import Skeleton
 
@@ -149,17 +158,32 @@ def check_skeleton(skeleton: Skeleton, where: str = "deepmimic") -> None:
             raise MotionDataError(f"{where}: skeleton {skeleton.name!r} hinges {body} about {tuple(axis)}; DeepMimic's axis is (0, -1, 0) (z up)")
 
 
+#: the shortest and longest frame duration, s (frame rates of 1 to 10,000 Hz)
+MIN_DURATION, MAX_DURATION = 1e-4, 1.0
+
+
 def _frame_rate(path: Path, durations: np.ndarray) -> tuple[float, bool]:
     """(fps, uniform) from the per-frame durations (all but the last frame's)."""
     if np.any(durations <= 0):
         bad = int(np.argwhere(durations <= 0)[0, 0])
         raise MotionDataError(f"{path}: frame {bad} has non-positive duration {durations[bad]}")
+    odd = (durations < MIN_DURATION) | (durations > MAX_DURATION)
+    if np.any(odd):
+        bad = int(np.argwhere(odd)[0, 0])
+        raise MotionDataError(
+            f"{path}: frame {bad} lasts {durations[bad]:.3g} s; a frame lasts {MIN_DURATION:g} to {MAX_DURATION:g} s (1 to 10,000 frames per second)"
+        )
     dt = float(np.median(durations))
     fps = 1.0 / dt
     if abs(fps - round(fps)) < 1e-3 * fps:
         fps = float(round(fps))
     uniform = bool(np.all(np.abs(durations - 1.0 / fps) <= 1e-3 / fps))
     return fps, uniform
+
+
+def _short_repr(value: object) -> str:
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
 
 
 #: largest DeepMimic file read (the bundled clips are 10-200 kB)
@@ -202,11 +226,16 @@ def load_deepmimic_file(path: str | Path, skeleton: Skeleton, name: str | None =
         if not isinstance(row, list) or len(row) != FRAME_WIDTH:
             got = len(row) if isinstance(row, list) else type(row).__name__
             raise MotionDataError(f"{path}: frame {i} has {got} values, expected {FRAME_WIDTH}")
+    for i, row in enumerate(frames):
+        for j, value in enumerate(row):
+            if type(value) not in (int, float):  # not bool (true would read as 1.0), nor a number written as text
+                raise MotionDataError(f"{path}: frame {i} value {j} is {_short_repr(value)}; frames hold numbers")
     try:
         data = np.asarray(frames, dtype=np.float64)
     except (TypeError, ValueError, OverflowError) as exc:  # OverflowError: an integer like 10**400
         raise MotionDataError(f"{path}: frames hold non-numeric values ({exc})") from None
     check_finite(path, "frame data", data)
+    check_magnitude(path, "the root position", data[:, 1:4], MAX_POSITION, " m")
     T = data.shape[0]
     if T < 2:
         raise MotionDataError(f"{path}: clip has {T} frame; at least 2 are needed")
@@ -230,6 +259,7 @@ def load_deepmimic_file(path: str | Path, skeleton: Skeleton, name: str | None =
     if not uniform:
         src_t = np.concatenate(([0.0], np.cumsum(data[:-1, 0])))
         n = max(int(round(src_t[-1] * fps)), 1)
+        check_frame_count(path, n + 1, f"clip resampled to {fps:g} fps")
         dst_t = np.linspace(0.0, src_t[-1], n + 1)
         root_pos, root_rot, joint_rot = resample(src_t, root_pos, root_rot, joint_rot, dst_t)
 

@@ -19,7 +19,7 @@ from typing import Callable, Iterable, Literal, Sequence
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from mocap.motion.clip import Clip, MotionDataError
+from mocap.motion.clip import MAX_FRAMES, Clip, MotionDataError, check_frame_count, check_npz  # noqa: F401  (re-exported)
 from mocap.roles import MotionSource
 from mocap.skeleton import Skeleton
 
@@ -129,6 +129,20 @@ def check_finite(path: Path | str, what: str, arr: np.ndarray) -> None:
     if not np.all(np.isfinite(arr)):
         bad = int(np.argwhere(~np.isfinite(arr.reshape(arr.shape[0], -1)))[0, 0])
         raise MotionDataError(f"{path}: {what} contains NaN or infinite values (first at frame {bad})")
+
+
+#: the largest root position, m (a clip 10 km from the origin is a unit mistake or a damaged file)
+MAX_POSITION = 10_000.0
+
+
+def check_magnitude(path: Path | str, what: str, arr: np.ndarray, bound: float, unit: str = "") -> None:
+    """Raise :class:`MotionDataError` naming ``path`` and the first frame of ``arr`` (T, ...) with a
+    value beyond ``bound`` in magnitude (``arr`` is finite: :func:`check_finite` first)."""
+    big = np.abs(arr.reshape(arr.shape[0], -1)) > bound
+    if np.any(big):
+        frame, col = (int(i) for i in np.argwhere(big)[0])
+        value = float(arr.reshape(arr.shape[0], -1)[frame, col])
+        raise MotionDataError(f"{path}: {what} holds {value:.3g}{unit} at frame {frame}; at most {bound:g}{unit} in magnitude")
 
 
 def resample(

@@ -4,7 +4,8 @@ A policy file's ``config`` decides what :class:`mocap.rl.networks.ActorCritic` a
 of ``obs_dim: 3e8`` or ``actor_hidden: [583, 1300000]`` would allocate gigabytes before the weights
 were ever compared, and ``activation: "nosuch"`` or ``obs_dim: "abc"`` would end in a traceback. This
 model checks types, ranges and the total size first (:func:`check_policy_config`), and
-:func:`check_state_dict` checks the weights' container (a mapping of names to tensors).
+:func:`check_state_dict` checks the weights (a mapping of names to finite real tensors, no negative
+normalizer variance).
 """
 
 from __future__ import annotations
@@ -94,7 +95,23 @@ def check_state_dict(path: Path, state: Any) -> dict[str, torch.Tensor]:
     for key, value in state.items():  # a module's ``_extra_state`` (the normalizers' settings) may be plain data
         if not isinstance(key, str) or not (isinstance(value, torch.Tensor) or key.endswith("_extra_state")):
             raise CheckpointError(f"{path}: the policy's weights hold {str(key)[:60]!r}: {type(value).__name__}, not a named tensor (corrupt file?)")
+        if isinstance(value, torch.Tensor):
+            _check_values(path, key, value)
     return state
+
+
+def _check_values(path: Path, key: str, value: torch.Tensor) -> None:
+    """One weight tensor: real floating-point numbers (no bool, integer or complex), all finite, and a
+    normalizer's variance (``*_norm.var``) not negative; a :class:`CheckpointError` naming ``path``
+    and ``key`` otherwise."""
+    if not value.dtype.is_floating_point:
+        raise CheckpointError(f"{path}: the policy's weight {key[:60]!r} holds {value.dtype} values, not real numbers (corrupt or hand-edited file?)")
+    if not bool(torch.isfinite(value).all()):
+        raise CheckpointError(
+            f"{path}: the policy's weight {key[:60]!r} holds NaN or infinite values (a diverged run, or a corrupt file); use an earlier checkpoint"
+        )
+    if key.endswith("_norm.var") and bool((value < 0).any()):
+        raise CheckpointError(f"{path}: the policy's normalizer variance {key[:60]!r} is negative (corrupt or hand-edited file?)")
 
 
 __all__ = ["MAX_POLICY_DIM", "MAX_POLICY_PARAMETERS", "PolicyConfig", "check_policy_config", "check_state_dict"]
