@@ -207,6 +207,10 @@ class TaskBase:
         contact = self._ground_contact(state)
         if contact.numel() == 0:
             contact = torch.zeros(state.body_pos.shape[:2], dtype=torch.bool, device=state.root_pos.device)
+        if self.fall.rule == "contact_and_low_body":  # the official code's rule (FallParams.rule)
+            allowed = self._allowed.to(contact.device)
+            low = (state.body_pos[..., 2] < self.fall.fall_height) & ~allowed
+            return (contact & ~allowed).any(-1) & low.any(-1) & (self.progress.to(contact.device) > 1)
         return fallen(
             state,
             self._allowed.to(contact.device),

@@ -32,6 +32,12 @@ class FallParams(BaseModel):
         None,
         description="bodies allowed to touch the ground (default: the skeleton's feet, as the code's contact bodies)",
     )
+    rule: Literal["contact_or_low_root", "contact_and_low_body"] = Field(
+        "contact_or_low_root",
+        description="'contact_or_low_root' = a non-foot ground contact OR the root below fall_height (this project's); "
+        "'contact_and_low_body' = a non-foot contact AND some non-foot body below fall_height, not in an episode's first "
+        "two control steps ([CODE] ASE/PULSE compute_humanoid_reset: fall_contact & fall_height, progress_buf > 1)",
+    )
 
 
 class StartParams(BaseModel):
