@@ -55,7 +55,7 @@ def main(argv: list[str] | None = None) -> int:
     record = {"command": "python " + " ".join(sys.argv), "eval": args.eval_name, "arms": table, "efficiency": eff}
     args.out.with_suffix(".json").write_text(json.dumps(record, indent=2) + "\n")
     lines = [f"# {args.out.name}", "", f"Deterministic task-eval ({args.eval_name}: 64 envs x 10 s from {args.start_clips} starts); "
-             "mean over seeds [95% bootstrap interval] (values per seed).", "",
+             "mean over seeds [95% bootstrap interval] (each seed's value in the JSON).", "",
              "| arm | seeds | " + " | ".join(METRICS) + " |", "|---|---|" + "---|" * len(METRICS)]  # fmt: skip
     for arm, row in table.items():
         cells = []
