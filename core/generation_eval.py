@@ -15,6 +15,7 @@ from torch import Tensor
 from mocap.generation import GenerationParams, render_falls_by_start_clip, render_generation
 from mocap.interfaces import Imitator, Simulator, Trainer
 from mocap.motion.library import MotionLibrary
+from mocap.naturalness import nearest_transitions
 from mocap.observations import SixD, proprioception
 from mocap.rotations import heading_quat, quat_apply, quat_conjugate
 from mocap.state import Observations
@@ -109,23 +110,17 @@ def motion_matching(generated: Tensor, dataset: Tensor, threshold: float, chunk:
         generated: (M, F) generated transitions; dataset: (K, F) dataset transitions (unnormalized).
         threshold: filter threshold on the squared distance divided by F.
     """
-    mean, std = dataset.mean(0), dataset.std(0).clamp_min(1e-6)
-    g, d = (generated - mean) / std, (dataset - mean) / std
-    best = torch.empty(len(g))
-    idx = torch.empty(len(g), dtype=torch.long)
-    for s in range(0, len(g), chunk):
-        dist = torch.cdist(g[s : s + chunk], d).pow(2)
-        best[s : s + chunk], idx[s : s + chunk] = dist.min(-1)
-    keep = best / g.shape[1] <= threshold
-    covered = torch.zeros(len(d), dtype=torch.bool)
+    best, idx = nearest_transitions(generated, dataset, chunk)
+    keep = best / generated.shape[1] <= threshold
+    covered = torch.zeros(len(dataset), dtype=torch.bool)
     covered[idx[keep]] = True
     return {
         "match_distance": float(best[keep].mean()) if bool(keep.any()) else float("nan"),
         "match_distance_std": float(best[keep].std()) if int(keep.sum()) > 1 else float("nan"),
         "filtered": float(1.0 - keep.double().mean()),
         "coverage": float(covered.double().mean()),
-        "dataset_transitions": int(len(d)),
-        "generated_transitions": int(len(g)),
+        "dataset_transitions": int(len(dataset)),
+        "generated_transitions": int(len(generated)),
     }
 
 

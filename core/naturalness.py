@@ -57,15 +57,22 @@ class NaturalnessParams:
     crouch_fraction: float = 0.8
 
 
-def nearest_per_feature(generated: Tensor, dataset: Tensor, chunk: int = 4096) -> Tensor:
-    """(M,) squared distance of each generated transition to its nearest dataset transition, in
-    features standardized by the dataset's mean and std, divided by the feature count F."""
+def nearest_transitions(generated: Tensor, dataset: Tensor, chunk: int = 4096) -> tuple[Tensor, Tensor]:
+    """``(best, idx)`` (M,): the squared distance of each generated transition to its nearest dataset
+    transition and that transition's index, in features standardized by the dataset's mean and std
+    (hybrid_rvq Eq. 8's matching; :func:`mocap.generation_eval.motion_matching` filters on it too)."""
     mean, std = dataset.mean(0), dataset.std(0).clamp_min(1e-6)
     g, d = (generated - mean) / std, (dataset - mean) / std
     best = torch.empty(len(g), dtype=g.dtype)
+    idx = torch.empty(len(g), dtype=torch.long)
     for s in range(0, len(g), chunk):
-        best[s : s + chunk] = torch.cdist(g[s : s + chunk], d).pow(2).min(-1).values
-    return best / g.shape[1]
+        best[s : s + chunk], idx[s : s + chunk] = torch.cdist(g[s : s + chunk], d).pow(2).min(-1)
+    return best, idx
+
+
+def nearest_per_feature(generated: Tensor, dataset: Tensor, chunk: int = 4096) -> Tensor:
+    """(M,) :func:`nearest_transitions`' squared distance divided by the feature count F."""
+    return nearest_transitions(generated, dataset, chunk)[0] / generated.shape[1]
 
 
 class NaturalnessRecorder:
@@ -136,4 +143,4 @@ class NaturalnessRecorder:
         return out
 
 
-__all__ = ["NATURALNESS_KEYS", "NaturalnessParams", "NaturalnessRecorder", "nearest_per_feature"]
+__all__ = ["NATURALNESS_KEYS", "NaturalnessParams", "NaturalnessRecorder", "nearest_per_feature", "nearest_transitions"]

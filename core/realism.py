@@ -20,6 +20,7 @@ the data, near 0 for what the judge tells apart from it.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -98,14 +99,14 @@ def spoilt_transitions(lib: MotionLibrary, n: int, dt: float, gen: torch.Generat
     sigma = _rand(k, 0.01, 0.1, gen)[:, None, None].double()
     noise = lambda s: s.body_pos + sigma.to(s.body_pos.dtype) * torch.randn(s.body_pos.shape, generator=gen).to(s.body_pos.dtype)  # noqa: E731
     pa, pb = noise(a), noise(b)
-    out.append(transitions(_replace(a, body_pos=pa, root_pos=pa[:, 0]), _replace(b, body_pos=pb, root_pos=pb[:, 0]), sixd))
+    out.append(transitions(replace(a, body_pos=pa, root_pos=pa[:, 0]), replace(b, body_pos=pb, root_pos=pb[:, 0]), sixd))
     a, b, _ = frame_pairs(lib, k, dt, gen)  # wrong speed
     slow = torch.rand(k, generator=gen) < 0.5
     factor = torch.where(slow, _rand(k, 0.0, 0.5, gen), _rand(k, 1.5, 3.0, gen))
-    scale = lambda s, f: _replace(s, body_lin_vel=s.body_lin_vel * f[:, None, None], body_ang_vel=s.body_ang_vel * f[:, None, None])  # noqa: E731
+    scale = lambda s, f: replace(s, body_lin_vel=s.body_lin_vel * f[:, None, None], body_ang_vel=s.body_ang_vel * f[:, None, None])  # noqa: E731
     out.append(transitions(scale(a, factor.to(a.body_lin_vel.dtype)), scale(b, factor.to(b.body_lin_vel.dtype)), sixd))
     a, b, _ = frame_pairs(lib, k, dt, gen)  # distorted pose
-    turn = lambda s: _replace(s, body_rot=quat_normalize(quat_mul(_random_turns(s.body_rot.shape[:2], gen).to(s.body_rot.dtype), s.body_rot)))  # noqa: E731
+    turn = lambda s: replace(s, body_rot=quat_normalize(quat_mul(_random_turns(s.body_rot.shape[:2], gen).to(s.body_rot.dtype), s.body_rot)))  # noqa: E731
     out.append(transitions(turn(a), turn(b), sixd))
     a, b, _ = frame_pairs(lib, k, dt, gen, gap=torch.randint(3, 11, (k,), generator=gen).float())  # too fast
     out.append(transitions(a, b, sixd))
@@ -119,12 +120,6 @@ def _random_turns(shape: torch.Size, gen: torch.Generator) -> Tensor:
     axis = torch.randn(*shape, 3, generator=gen)
     angle = _rand(int(math.prod(shape)), 0.05, 0.5, gen).reshape(shape)
     return quat_from_axis_angle(axis / axis.norm(dim=-1, keepdim=True), angle)
-
-
-def _replace(state: HumanoidState, **fields: Tensor) -> HumanoidState:
-    import dataclasses
-
-    return dataclasses.replace(state, **fields)
 
 
 def train_judge(

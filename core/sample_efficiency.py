@@ -11,7 +11,7 @@ run's ``metrics.jsonl`` (default: the task stage's ``episode/normalized_return``
   the curve is held at its first value before its first point).
 
 :func:`efficiency` aggregates them per cell: means, 95% bootstrap intervals over seeds (percentiles of
-the resampled means, :func:`bootstrap_ci`) and, for the thresholds, how many seeds reached them.
+the resampled means, :func:`mocap.intervals.bootstrap_mean`) and, for the thresholds, how many seeds reached them.
 """
 
 from __future__ import annotations
@@ -83,12 +83,6 @@ def auc(curve: Curve, budget: float) -> float:
     return float(np.trapezoid(ys, xs) / budget)
 
 
-def bootstrap_ci(values: list[float], resamples: int = 2000, seed: int = 0) -> tuple[float, float] | None:
-    """95% percentile bootstrap interval of the mean over ``values`` (None for fewer than two):
-    :func:`mocap.intervals.bootstrap_mean`."""
-    return bootstrap_mean(values, resamples, seed)
-
-
 def efficiency(curves: dict[str, list[Curve]], window: int = 5, fractions: tuple[float, ...] = (0.5, 0.8)) -> dict[str, Any]:
     """Per cell (name -> one curve per seed): the module docstring's quantities. Returns
     ``{"best_final", "budget", "cells": {cell: {"final", "auc", "steps_to_50", ...}}}``, each an entry
@@ -112,7 +106,7 @@ def efficiency(curves: dict[str, list[Curve]], window: int = 5, fractions: tuple
 
 def _entry(values: list[float]) -> dict[str, Any]:
     vals = [v for v in values if math.isfinite(v)]
-    return {"mean": float(np.mean(vals)) if vals else math.nan, "ci95": bootstrap_ci(vals), "n": len(vals)}
+    return {"mean": float(np.mean(vals)) if vals else math.nan, "ci95": bootstrap_mean(vals), "n": len(vals)}
 
 
 def render_efficiency(table: dict[str, Any]) -> str:
@@ -155,4 +149,4 @@ def _show(e: dict[str, Any], scale: float = 1.0) -> str:
     return text
 
 
-__all__ = ["auc", "bootstrap_ci", "efficiency", "final_value", "read_curve", "render_efficiency", "steps_to", "trailing_mean"]
+__all__ = ["auc", "efficiency", "final_value", "read_curve", "render_efficiency", "steps_to", "trailing_mean"]

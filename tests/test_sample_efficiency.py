@@ -13,7 +13,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mocap.matrix import Cell, comparison
-from mocap.sample_efficiency import auc, bootstrap_ci, efficiency, read_curve, steps_to, trailing_mean
+from mocap.intervals import bootstrap_mean as bootstrap_ci
+from mocap.sample_efficiency import auc, efficiency, read_curve, steps_to, trailing_mean
 
 FAST = settings(max_examples=40, deadline=None, derandomize=True)
 

@@ -31,7 +31,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--start-clips", default="walk,run")
     ap.add_argument("--out", type=Path, required=True)
     args = ap.parse_args(argv)
-    from mocap.sample_efficiency import bootstrap_ci, efficiency, read_curve, render_efficiency
+    from mocap.intervals import bootstrap_mean
+    from mocap.sample_efficiency import efficiency, read_curve, render_efficiency
 
     table: dict[str, dict] = {}
     curves = {}
@@ -47,7 +48,7 @@ def main(argv: list[str] | None = None) -> int:
         row = {"seeds": [r.name for r in runs]}
         for m in METRICS:
             vals = [float(e[m]) for e in evals if isinstance(e.get(m), (int, float)) and math.isfinite(float(e[m]))]
-            row[m] = {"mean": float(np.mean(vals)) if vals else math.nan, "ci95": bootstrap_ci(vals), "values": vals}
+            row[m] = {"mean": float(np.mean(vals)) if vals else math.nan, "ci95": bootstrap_mean(vals), "values": vals}
         table[arm] = row
         curves[arm] = [c for c in (read_curve(r / "metrics.jsonl") for r in runs) if len(c[0])]
     eff = efficiency({a: c for a, c in curves.items() if c})
